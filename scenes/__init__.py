@@ -1,0 +1,1 @@
+"""Bundled scene files (TOML), found with ``importlib.resources``."""

@@ -1,0 +1,30 @@
+"""warpsim: swarms of spheres bouncing among static rounded boxes, with exact continuous
+collision detection in NVIDIA Warp kernels, exported as USD animation.
+
+The public surface is the re-exports below; ``warpsim.export`` (USD) is imported on first use.
+"""
+
+from .obstacles import RoundedBox, RoundedBoxes
+from .scene import Scene
+from .scene_files import list_scenes
+from .swarm import Swarm
+from .trajectory import Trajectory
+
+__all__ = [
+    "RoundedBox",
+    "RoundedBoxes",
+    "Scene",
+    "Swarm",
+    "Trajectory",
+    "list_scenes",
+]
+
+__version__ = "0.1.0"
+
+
+def __getattr__(name):
+    if name == "export":  # lazy: only users of USD need pxr
+        import importlib
+
+        return importlib.import_module(".export", __name__)
+    raise AttributeError(f"module 'warpsim' has no attribute {name!r}")
