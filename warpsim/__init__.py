@@ -4,6 +4,11 @@ collision detection in NVIDIA Warp kernels, exported as USD animation.
 The public surface is the re-exports below; ``warpsim.export`` (USD) is imported on first use.
 """
 
+import warp as _wp
+
+_wp.config.quiet = True  # no banner on import; Warp errors and warnings still print
+
+from .collide import Contacts, collide_box, collide_boxes
 from .obstacles import RoundedBox, RoundedBoxes
 from .scene import Scene
 from .scene_files import list_scenes
@@ -11,6 +16,9 @@ from .swarm import Swarm
 from .trajectory import Trajectory
 
 __all__ = [
+    "Contacts",
+    "collide_box",
+    "collide_boxes",
     "RoundedBox",
     "RoundedBoxes",
     "Scene",

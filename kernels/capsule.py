@@ -1,0 +1,114 @@
+"""Segment against a sphere and against a capsule (a segment swept by a sphere).
+
+These are the edge and corner parts of the rounded-box sweep. All roots use the stable form
+``t = c / (-b + sqrt(b^2 - a c))`` of the smaller root of ``a t^2 + 2 b t + c = 0``, which never
+divides by ``a`` (zero for a direction along the capsule axis) and loses no digits when ``b``
+dominates.
+"""
+
+
+from functools import cache
+from types import SimpleNamespace
+
+import warp as wp
+
+from .precision import Precision
+
+wp.set_module_options({"enable_backward": False})
+
+
+@cache
+def capsule_funcs(p: Precision) -> SimpleNamespace:
+    """Build the sphere and capsule ``@wp.func``s for one precision.
+
+    Returns:
+        Namespace with ``segment_sphere`` and ``segment_capsule``.
+    """
+    scalar, vec3 = p.scalar, p.vec3
+    ZERO = scalar(0.0)
+    ONE = scalar(1.0)
+
+    @wp.func
+    def entry_root(a2: scalar, b: scalar, c: scalar):
+        """First ``t`` in [0, 1] where ``a2 t^2 + 2 b t + c`` becomes <= 0, starting at ``c > 0``.
+
+        Returns:
+            ``(hit, t)``; no hit when moving away or tangent (``b >= 0``), when the quadratic
+            stays positive (negative discriminant) or when the root lies beyond ``t = 1``.
+        """
+        hit = 0
+        t = ONE
+        if b < ZERO:
+            disc = b * b - a2 * c
+            if disc >= ZERO:
+                t = c / (-b + wp.sqrt(disc))
+                if t <= ONE:
+                    hit = 1
+        return hit, t
+
+    @wp.func
+    def segment_sphere(a: vec3, d: vec3, center: vec3, radius: scalar):
+        """Segment ``a + t d``, ``t`` in [0, 1], against the ball of ``radius`` at ``center``.
+
+        Returns:
+            ``(hit, t, normal)`` with the unit outward normal at the contact. A start on or
+            inside the ball is a hit at ``t = 0`` (the caller decides whether the motion goes
+            in); no hit leaves ``t = 1`` and a zero normal.
+        """
+        w = a - center
+        c = wp.dot(w, w) - radius * radius
+        hit = 0
+        t = ONE
+        if c <= ZERO:
+            hit = 1
+            t = ZERO
+        else:
+            hit, t = entry_root(wp.dot(d, d), wp.dot(w, d), c)
+        normal = vec3(ZERO, ZERO, ZERO)
+        if hit == 1:
+            normal = wp.normalize(w + t * d)
+        return hit, t, normal
+
+    @wp.func
+    def segment_capsule(a: vec3, d: vec3, e0: vec3, e1: vec3, radius: scalar):
+        """Segment ``a + t d``, ``t`` in [0, 1], against the capsule of ``radius`` about ``e0-e1``.
+
+        The infinite cylinder first (the problem in the plane perpendicular to the axis); its
+        entry is the hit when it falls between the end caps, else the end sphere on that side
+        is the answer. A direction along the axis never enters the cylinder from outside, and a
+        start inside the cylinder goes straight to the end sphere it is heading for. A capsule
+        of zero length is a sphere.
+
+        Returns:
+            ``(hit, t, normal)`` as :func:`segment_sphere`.
+        """
+        axis = e1 - e0
+        length = wp.length(axis)
+        hit = 0
+        t = ONE
+        normal = vec3(ZERO, ZERO, ZERO)
+        if length <= ZERO:
+            hit, t, normal = segment_sphere(a, d, e0, radius)
+        else:
+            u = axis / length
+            w = a - e0
+            w_perp = w - wp.dot(w, u) * u
+            d_perp = d - wp.dot(d, u) * u
+            c = wp.dot(w_perp, w_perp) - radius * radius
+            t_cyl = ZERO
+            in_cylinder = 1
+            if c > ZERO:
+                in_cylinder, t_cyl = entry_root(wp.dot(d_perp, d_perp), wp.dot(w_perp, d_perp), c)
+            if in_cylinder == 1:
+                y = wp.dot(w + t_cyl * d, u)
+                if y < ZERO:
+                    hit, t, normal = segment_sphere(a, d, e0, radius)
+                elif y > length:
+                    hit, t, normal = segment_sphere(a, d, e1, radius)
+                else:
+                    hit = 1
+                    t = t_cyl
+                    normal = wp.normalize(w_perp + t_cyl * d_perp)
+        return hit, t, normal
+
+    return SimpleNamespace(segment_sphere=segment_sphere, segment_capsule=segment_capsule)

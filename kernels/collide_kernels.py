@@ -1,0 +1,71 @@
+"""Kernels for the batched single-frame queries: one thread per sphere, numpy-free."""
+
+
+from functools import cache
+
+import warp as wp
+
+from .nearest import nearest_funcs
+from .precision import precision
+
+wp.set_module_options({"enable_backward": False})
+
+
+@cache
+def collide_kernel(precision_name: str):
+    """The nearest-contact kernel (sheet methods 1 and 2) for one precision.
+
+    Per sphere: the centre would move from ``A`` to ``B = A + v dt``; the kernel finds the first
+    contact over all boxes and writes the SPEC results. Rows without a contact hold ``box = -1``,
+    ``t = 1``, ``position = new_position = B``, ``normal = 0`` and ``new_velocity = v``.
+    """
+    p = precision(precision_name)
+    scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
+    nearest_hit = nearest_funcs(p).nearest_hit
+    TWO = scalar(2.0)
+    ONE = scalar(1.0)
+
+    @wp.kernel(module="unique")
+    def collide_boxes_kernel(
+        # Model:
+        box_center: wp.array(dtype=vec3),
+        box_rotation: wp.array(dtype=mat33),
+        box_half_extents: wp.array(dtype=vec3),
+        box_radius: wp.array(dtype=scalar),
+        box_bound: wp.array(dtype=scalar),
+        dt: scalar,
+        # In:
+        position_in: wp.array(dtype=vec3),
+        velocity_in: wp.array(dtype=vec3),
+        radius_in: wp.array(dtype=scalar),
+        # Out:
+        box_out: wp.array(dtype=wp.int32),
+        t_out: wp.array(dtype=scalar),
+        contact_out: wp.array(dtype=vec3),
+        normal_out: wp.array(dtype=vec3),
+        new_position_out: wp.array(dtype=vec3),
+        new_velocity_out: wp.array(dtype=vec3),
+    ):
+        i = wp.tid()
+        a = position_in[i]
+        v = velocity_in[i]
+        d = v * dt
+        box, t, n = nearest_hit(a, d, radius_in[i], box_center, box_rotation,
+                                box_half_extents, box_radius, box_bound)
+        contact = a + t * d
+        new_v = v
+        new_p = contact
+        if box >= 0:
+            new_v = v - TWO * wp.dot(v, n) * n
+            new_p = contact + (ONE - t) * (d - TWO * wp.dot(d, n) * n)
+        else:
+            new_p = a + d
+            contact = new_p
+        box_out[i] = box
+        t_out[i] = t
+        contact_out[i] = contact
+        normal_out[i] = n
+        new_position_out[i] = new_p
+        new_velocity_out[i] = new_v
+
+    return collide_boxes_kernel
