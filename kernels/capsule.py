@@ -36,7 +36,7 @@ def capsule_funcs(p: Precision) -> SimpleNamespace:
             ``(hit, t)``; no hit when moving away or tangent (``b >= 0``), when the quadratic
             stays positive (negative discriminant) or when the root lies beyond ``t = 1``.
         """
-        hit = 0
+        hit = int(0)
         t = ONE
         if b < ZERO:
             disc = b * b - a2 * c
@@ -57,7 +57,7 @@ def capsule_funcs(p: Precision) -> SimpleNamespace:
         """
         w = a - center
         c = wp.dot(w, w) - radius * radius
-        hit = 0
+        hit = int(0)
         t = ONE
         if c <= ZERO:
             hit = 1
@@ -84,7 +84,7 @@ def capsule_funcs(p: Precision) -> SimpleNamespace:
         """
         axis = e1 - e0
         length = wp.length(axis)
-        hit = 0
+        hit = int(0)
         t = ONE
         normal = vec3(ZERO, ZERO, ZERO)
         if length <= ZERO:

@@ -1,10 +1,12 @@
-"""Kernels for the batched single-frame queries: one thread per sphere, numpy-free."""
+"""Kernels for the batched single-frame queries (sheet methods 1-3): one thread per sphere."""
 
 
 from functools import cache
 
 import warp as wp
 
+from .bounce import bounce_funcs
+from .dynamics import dynamics_funcs
 from .nearest import nearest_funcs
 from .precision import precision
 
@@ -69,3 +71,59 @@ def collide_kernel(precision_name: str):
         new_velocity_out[i] = new_v
 
     return collide_boxes_kernel
+
+
+@cache
+def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool):
+    """The multi-bounce kernel (sheet method 3) for one feature set, without gravity.
+
+    Per sphere: the bounce loop over the frame's straight-line displacement ``v dt``. Outputs the
+    number of contacts taken, whether the cap stopped the sphere, and the new position, velocity
+    and angular momentum (the sheet's third prototype, its by-value output fixed).
+    """
+    p = precision(precision_name)
+    scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
+    bounce_path = bounce_funcs(p, max_bounces, spin, lossy).bounce_path
+    kinetic_energy = dynamics_funcs(p).kinetic_energy
+    ZERO = scalar(0.0)
+
+    @wp.kernel(module="unique")
+    def bounce_spheres_kernel(
+        # Model:
+        box_center: wp.array(dtype=vec3),
+        box_rotation: wp.array(dtype=mat33),
+        box_half_extents: wp.array(dtype=vec3),
+        box_radius: wp.array(dtype=scalar),
+        box_bound: wp.array(dtype=scalar),
+        dt: scalar,
+        friction: scalar,
+        max_rot: scalar,
+        retention: scalar,
+        # In:
+        position_in: wp.array(dtype=vec3),
+        velocity_in: wp.array(dtype=vec3),
+        radius_in: wp.array(dtype=scalar),
+        mass_in: wp.array(dtype=scalar),
+        angular_momentum_in: wp.array(dtype=vec3),
+        # Out:
+        bounces_out: wp.array(dtype=wp.int32),
+        capped_out: wp.array(dtype=wp.int32),
+        position_out: wp.array(dtype=vec3),
+        velocity_out: wp.array(dtype=vec3),
+        angular_momentum_out: wp.array(dtype=vec3),
+    ):
+        i = wp.tid()
+        v = velocity_in[i]
+        m = mass_in[i]
+        zero = vec3(ZERO, ZERO, ZERO)
+        x, v_new, L, energy, bounces, capped = bounce_path(
+            position_in[i], v, radius_in[i], m, angular_momentum_in[i], kinetic_energy(m, v),
+            zero, zero, dt, friction, max_rot, retention,
+            box_center, box_rotation, box_half_extents, box_radius, box_bound)
+        bounces_out[i] = bounces
+        capped_out[i] = capped
+        position_out[i] = x
+        velocity_out[i] = v_new
+        angular_momentum_out[i] = L
+
+    return bounce_spheres_kernel

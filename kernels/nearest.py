@@ -58,7 +58,7 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         Returns:
             ``(hit, t, normal)`` with the normal in world coordinates (see ``sweep_rounded_box``).
         """
-        hit = 0
+        hit = int(0)
         t = ONE
         normal = vec3(ZERO, ZERO, ZERO)
         reach = (bound + r) * SLACK
@@ -79,7 +79,7 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         Returns:
             ``(box, t, normal)``: ``box`` is -1 when nothing is hit (then ``t = 1``, normal 0).
         """
-        best = -1
+        best = int(-1)
         best_t = ONE
         best_n = vec3(ZERO, ZERO, ZERO)
         for k in range(box_center.shape[0]):

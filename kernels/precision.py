@@ -44,6 +44,15 @@ class Precision:
         return self.eps
 
     @property
+    def tangent_rel(self) -> float:
+        """A start in contact moves *in* only when ``d . n < -tangent_rel |d|``.
+
+        A path leaving a contact along the surface carries rounding of a few ulps in ``d . n``;
+        without this margin it would count as a new contact at ``t = 0`` again and again.
+        """
+        return 64.0 * self.eps
+
+    @property
     def sharp_rel(self) -> float:
         """A Minkowski radius ``R`` below this fraction of the local scale is a sharp box.
 

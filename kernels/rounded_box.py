@@ -34,6 +34,7 @@ def rounded_box_funcs(p: Precision) -> SimpleNamespace:
     ZERO = scalar(0.0)
     ONE = scalar(1.0)
     SHARP_REL = scalar(p.sharp_rel)
+    TANGENT_REL = scalar(p.tangent_rel)
 
     @wp.func
     def unit_axis(i: int, sign: scalar):
@@ -69,7 +70,7 @@ def rounded_box_funcs(p: Precision) -> SimpleNamespace:
             distance = dist - radius
             normal = w / dist
         else:
-            k = 0
+            k = int(0)
             depth = h[0] - wp.abs(a[0])
             for i in range(1, 3):
                 di = h[i] - wp.abs(a[i])
@@ -87,14 +88,15 @@ def rounded_box_funcs(p: Precision) -> SimpleNamespace:
         Returns:
             ``(touching, moving_in, normal)``: ``touching`` is 1 when ``a`` is on or inside the
             surface (signed distance <= 0); ``moving_in`` is 1 when, in addition, ``d`` goes into
-            the surface (``d . n < 0``): that is a hit at ``t = 0``. Moving away or along is not.
+            the surface (``d . n < -TANGENT_REL |d|``): that is a hit at ``t = 0``. Moving away
+            or along it (within rounding) is not.
         """
         distance, normal = rounded_box_distance(a, h, radius)
-        touching = 0
-        moving_in = 0
+        touching = int(0)
+        moving_in = int(0)
         if distance <= ZERO:
             touching = 1
-            if wp.dot(d, normal) < ZERO:
+            if wp.dot(d, normal) < -TANGENT_REL * wp.length(d):
                 moving_in = 1
         return touching, moving_in, normal
 
@@ -130,7 +132,7 @@ def rounded_box_funcs(p: Precision) -> SimpleNamespace:
             ``(hit, t, normal)``: ``hit`` 1 or 0, ``t`` in [0, 1] (1 when no hit) and the unit
             outward normal at the contact (zero when no hit).
         """
-        hit = 0
+        hit = int(0)
         t = ONE
         normal = vec3(ZERO, ZERO, ZERO)
         touching, moving_in, n0 = start_contact(a, d, h, radius)
@@ -147,8 +149,8 @@ def rounded_box_funcs(p: Precision) -> SimpleNamespace:
                 pe = a + t_entry * d
                 # Region of the entry point: which core slabs it lies outside of. The entry
                 # face counts as outside (its coordinate is h + R, or h when R = 0).
-                outside = 0
-                out_axis = 0
+                outside = int(0)
+                out_axis = int(0)
                 for i in range(3):
                     if i == axis or wp.abs(pe[i]) > h[i]:
                         outside += 1
@@ -164,7 +166,7 @@ def rounded_box_funcs(p: Precision) -> SimpleNamespace:
                     else:
                         # starts inside the grown box but outside the rounded one (rounding):
                         # the face it sticks out of the most.
-                        k = 0
+                        k = int(0)
                         best = wp.abs(pe[0]) - h[0]
                         for i in range(1, 3):
                             if wp.abs(pe[i]) - h[i] > best:

@@ -42,8 +42,8 @@ def slab_funcs(p: Precision) -> SimpleNamespace:
         dmax = wp.max(wp.max(wp.abs(d[0]), wp.abs(d[1])), wp.abs(d[2]))
         t_enter = NO_ENTRY
         t_exit = scalar(1.0)
-        axis = -1
-        hit = 1
+        axis = int(-1)
+        hit = int(1)
         for i in range(3):
             if wp.abs(d[i]) <= PARALLEL_REL * dmax:
                 if wp.abs(a[i]) > g[i]:

@@ -6,22 +6,29 @@ The public surface is the re-exports below; ``warpsim.export`` (USD) is imported
 
 import warp as _wp
 
-_wp.config.quiet = True  # no banner on import; Warp errors and warnings still print
+if _wp.config.log_level <= _wp.LOG_INFO:  # no banner nor per-module build lines; warnings print
+    _wp.config.log_level = _wp.LOG_WARNING
 
-from .collide import Contacts, collide_box, collide_boxes
+from .collide import Bounces, Contacts, bounce, collide_box, collide_boxes
 from .obstacles import RoundedBox, RoundedBoxes
 from .scene import Scene
 from .scene_files import list_scenes
+from .simulator import Simulator, State, Stats
 from .swarm import Swarm
 from .trajectory import Trajectory
 
 __all__ = [
+    "Bounces",
     "Contacts",
+    "bounce",
     "collide_box",
     "collide_boxes",
     "RoundedBox",
     "RoundedBoxes",
     "Scene",
+    "Simulator",
+    "State",
+    "Stats",
     "Swarm",
     "Trajectory",
     "list_scenes",

@@ -1,0 +1,112 @@
+"""Several bounces in one frame (the sheet's method 3): the per-sphere bounce loop.
+
+From its position the sphere follows its displacement for the frame; at the nearest contact it
+reflects and goes on with the rest of the path, until nothing is hit or ``max_bounces`` contacts
+were taken. The broken line is exactly as long as the straight one (elastic contacts). When the
+cap is reached with path still to go, the sphere stays at its last contact (never inside, never
+through) with its reflected velocity, and is counted as capped.
+
+Resting contacts: a contact whose approach speed is at most ``RESTING_FRAMES`` frames of gravity
+into the surface (``-v.n <= RESTING_FRAMES max(-g.n, 0) dt``) is a support, not a bounce: the
+normal part of the velocity and of the rest of the path is removed and the sphere slides on.
+This is what keeps a sphere at rest on a floor without jitter or sinking; a bounce that small
+would rise less than ``2 g dt^2`` (5 mm at 60 Hz).
+"""
+
+from functools import cache
+from types import SimpleNamespace
+
+import warp as wp
+
+from .dynamics import dynamics_funcs
+from .nearest import nearest_funcs
+from .precision import Precision
+
+wp.set_module_options({"enable_backward": False})
+
+#: Approach speeds up to this many frames of gravity make a resting (sliding) contact.
+RESTING_FRAMES = 2.0
+
+
+@cache
+def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> SimpleNamespace:
+    """Build the bounce loop for one precision and one feature set.
+
+    Args:
+        p: precision.
+        max_bounces: cap on contacts per frame (compiled in).
+        spin: update the angular momentum from contact friction (else ``L`` passes through
+            untouched and no spin code is compiled).
+        lossy: apply ``energy_retention`` at each bounce (else no loss code is compiled).
+
+    Returns:
+        Namespace with ``bounce_path``.
+    """
+    scalar, vec3 = p.scalar, p.vec3
+    nearest_hit = nearest_funcs(p).nearest_hit
+    dyn = dynamics_funcs(p)
+    friction_spin = dyn.friction_spin
+    potential = dyn.potential
+    ZERO = scalar(0.0)
+    ONE = scalar(1.0)
+    TWO = scalar(2.0)
+    REST = scalar(RESTING_FRAMES)
+    MAX_BOUNCES = int(max_bounces)
+
+    @wp.func
+    def bounce_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
+                    g: vec3, origin: vec3, dt: scalar, friction: scalar, max_rot: scalar,
+                    retention: scalar,
+                    box_center: wp.array(dtype=p.vec3), box_rotation: wp.array(dtype=p.mat33),
+                    box_half_extents: wp.array(dtype=p.vec3),
+                    box_radius: wp.array(dtype=p.scalar), box_bound: wp.array(dtype=p.scalar)):
+        """Move a sphere for one frame among the boxes, bouncing up to ``MAX_BOUNCES`` times.
+
+        Args:
+            a: centre at the start [m]. v: velocity for the frame [m/s]. r: radius [m].
+            m: mass [kg]. L: angular momentum [kg m^2/s]. energy: total energy [J] (see
+            ``dynamics``). g: gravity [m/s^2] (only for resting contacts and the loss's
+            potential). origin: potential reference point [m]. dt: frame duration [s].
+            friction: ``k_f`` [kg/s]. max_rot: ``|Rot|`` clamp [rad/s]. retention: kept
+            fraction of kinetic energy per bounce.
+
+        Returns:
+            ``(position, velocity, L, energy, bounces, capped)``: ``bounces`` counts the contacts
+            taken, ``capped`` is 1 when the cap stopped the sphere at its last contact.
+        """
+        d = v * dt
+        bounces = int(0)
+        capped = int(0)
+        done = int(0)
+        while done == 0:
+            box, t, n = nearest_hit(a, d, r, box_center, box_rotation, box_half_extents,
+                                    box_radius, box_bound)
+            if box < 0:
+                a = a + d
+                done = 1
+            elif bounces == MAX_BOUNCES:
+                capped = 1  # path left and no contact left: stay at the last contact
+                done = 1
+            else:
+                bounces += 1
+                contact = a + t * d
+                if wp.static(spin):
+                    L = friction_spin(L, v, n, r, m, dt, friction, max_rot)
+                vn = wp.dot(v, n)
+                dn = wp.dot(d, n)
+                if -vn <= REST * wp.max(-wp.dot(g, n), ZERO) * dt:
+                    v = v - vn * n
+                    d = (ONE - t) * (d - dn * n)
+                else:
+                    v = v - TWO * vn * n
+                    d = (ONE - t) * (d - TWO * dn * n)
+                    if wp.static(lossy):
+                        ep = potential(m, g, contact, origin)
+                        energy = ep + retention * (energy - ep)
+                        keep = wp.sqrt(retention)
+                        v = v * keep
+                        d = d * keep
+                a = contact
+        return a, v, L, energy, bounces, capped
+
+    return SimpleNamespace(bounce_path=bounce_path)
