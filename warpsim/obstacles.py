@@ -55,13 +55,11 @@ class RoundedBox:
 
     def __init__(self, center=(0.0, 0.0, 0.0), half_extents=(0.5, 0.5, 0.5),
                  rotation=IDENTITY_QUAT, radius: float = 0.0):
-        boxes = RoundedBoxes(center=[center], half_extents=[half_extents],
-                             rotation=[rotation], radius=[radius])
-        b = boxes[0]
-        object.__setattr__(self, "center", b.center)
-        object.__setattr__(self, "half_extents", b.half_extents)
-        object.__setattr__(self, "rotation", b.rotation)
-        object.__setattr__(self, "radius", b.radius)
+        object.__setattr__(self, "center", check.frozen(check.vec3("center", center)))
+        object.__setattr__(self, "half_extents", check.frozen(
+            check.nonnegative_vec3("half_extents", half_extents)))
+        object.__setattr__(self, "rotation", check.frozen(check.unit_quat("rotation", rotation)))
+        object.__setattr__(self, "radius", check.scalar("radius", radius, minimum=0.0))
 
     @classmethod
     def _trusted(cls, center, half_extents, rotation, radius) -> RoundedBox:

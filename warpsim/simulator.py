@@ -100,6 +100,8 @@ class Simulator:
         self.frame = 0
         self._n = len(swarm)
         self._radius_host = swarm.radius.copy()
+        self.mass = swarm.mass.copy()
+        """Sphere masses [kg], (N,), float64."""
         self._seconds = 0.0
         self._kernel = frame_kernel(self.precision, self.max_bounces, self.spin,
                                     scene.energy_correction, scene.energy_retention < 1.0)
@@ -216,7 +218,7 @@ class Simulator:
     def mechanical_energy(self, state: State | None = None) -> np.ndarray:
         """``1/2 m |v|^2 - m g . (p - origin)`` of a state [J], (N,), in float64."""
         s = self.state() if state is None else state
-        m = self._mass.numpy().astype(np.float64)
+        m = self.mass
         v = s.velocity.astype(np.float64)
         x = s.position.astype(np.float64)
         return 0.5 * m * np.einsum("ij,ij->i", v, v) - m * ((x - self.energy_origin)

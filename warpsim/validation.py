@@ -140,6 +140,25 @@ def unit_quat_array(name: str, value, count: int) -> np.ndarray:
     return arr / norm[:, None]
 
 
+def unit_quat(name: str, value) -> np.ndarray:
+    """One quaternion ``(x, y, z, w)``, finite and non-zero, returned normalised, shape (4,)."""
+    arr = _as_float_array(name, value)
+    if arr.shape != (4,):
+        raise ValueError(f"{name} must be a quaternion (x, y, z, w), got shape {arr.shape}")
+    norm = np.linalg.norm(arr)
+    if not np.isfinite(arr).all() or not norm > 1e-12:
+        raise ValueError(f"{name} must be a finite non-zero quaternion, got {_fmt(arr)}")
+    return arr / norm
+
+
+def nonnegative_vec3(name: str, value) -> np.ndarray:
+    """One finite 3-vector with every component >= 0 (half extents)."""
+    arr = vec3(name, value)
+    if (arr < 0.0).any():
+        raise ValueError(f"{name} must be >= 0 in every component, got {_fmt(arr)}")
+    return arr
+
+
 def precision(value: str) -> str:
     """``"float32"`` or ``"float64"``."""
     if value not in PRECISIONS:
