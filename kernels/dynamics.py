@@ -26,7 +26,8 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
 
     Returns:
         Namespace with ``inertia``, ``clamp_momentum``, ``rotation_vector``, ``friction_spin``,
-        ``potential``, ``speed_from_energy`` and ``integrate_orientation``.
+        ``potential``, ``speed_from_energy``, ``limit_speed_to_energy``, ``kinetic_energy`` and
+        ``integrate_orientation``.
     """
     scalar, vec3, quat = p.scalar, p.vec3, p.quat
     ZERO = scalar(0.0)
@@ -102,6 +103,25 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
         return out
 
     @wp.func
+    def limit_speed_to_energy(v: vec3, energy: scalar, m: scalar, g: vec3, position: vec3,
+                              origin: vec3):
+        """``v`` scaled down, never up, so that ``1/2 m |v|^2 + Ep <= E`` (no energy gain).
+
+        Without the full reset, semi-implicit Euler across a bounce can gain energy of order
+        ``m |g| |v| dt`` per contact; this one-sided bound removes the gain and nothing else.
+        """
+        kinetic = energy - potential(m, g, position, origin)
+        out = v
+        if kinetic <= ZERO:
+            out = vec3(ZERO, ZERO, ZERO)
+        else:
+            limit = TWO * kinetic / m
+            speed_sq = wp.dot(v, v)
+            if speed_sq > limit:
+                out = v * wp.sqrt(limit / speed_sq)
+        return out
+
+    @wp.func
     def kinetic_energy(m: scalar, v: vec3):
         return HALF * m * wp.dot(v, v)
 
@@ -118,4 +138,5 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
                            rotation_vector=rotation_vector, friction_spin=friction_spin,
                            potential=potential, speed_from_energy=speed_from_energy,
                            kinetic_energy=kinetic_energy,
+                           limit_speed_to_energy=limit_speed_to_energy,
                            integrate_orientation=integrate_orientation)

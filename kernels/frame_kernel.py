@@ -27,7 +27,8 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         max_bounces: contacts per sphere per frame, compiled in.
         spin: friction torque on ``L`` at contacts and orientation integration; without it the
             angular momentum and orientation arrays are neither read nor written.
-        energy_correction: reset ``|v|`` from the energy after the move.
+        energy_correction: reset ``|v|`` from the energy after the move; without it the speed
+            is only ever lowered to the energy bound, so energy is never gained either way.
         lossy: ``energy_retention < 1``.
     """
     p = precision(precision_name)
@@ -35,6 +36,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
     bounce_path = bounce_funcs(p, max_bounces, spin, lossy).bounce_path
     dyn = dynamics_funcs(p)
     speed_from_energy = dyn.speed_from_energy
+    limit_speed_to_energy = dyn.limit_speed_to_energy
     rotation_vector = dyn.rotation_vector
     inertia = dyn.inertia
     integrate_orientation = dyn.integrate_orientation
@@ -83,6 +85,8 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
             retention, box_center, box_rotation, box_half_extents, box_radius, box_bound)
         if wp.static(energy_correction):
             v = speed_from_energy(v, energy, m, gravity, x, origin)
+        else:
+            v = limit_speed_to_energy(v, energy, m, gravity, x, origin)
         position_out[i] = x
         velocity_out[i] = v
         energy_out[i] = energy

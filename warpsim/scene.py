@@ -16,7 +16,8 @@ class Scene:
         gravity: gravitational acceleration [m/s^2], world frame (y up).
         friction: friction coefficient ``k_f`` [kg/s] of ``F_f = -k_f v_t,rel``; 0 disables spin.
         energy_retention: fraction ``k`` in (0, 1] of kinetic energy kept at each contact.
-        energy_correction: reset the speed from the energy invariant after each frame.
+        energy_correction: reset the speed from the energy invariant after each frame; when
+            False the speed is only lowered to that bound (energy is never gained).
         max_angular_speed: clamp on ``|Rot|`` [rad/s], > 0.
         name: short name (bundled scenes use their file stem).
         description: one line for listings.

@@ -30,7 +30,7 @@ def _first_bad_row(mask: np.ndarray) -> int:
 def _check_finite_rows(name: str, arr: np.ndarray) -> None:
     bad = ~np.isfinite(arr)
     if bad.ndim > 1:
-        bad = bad.reshape(bad.shape[0], -1).any(axis=1)
+        bad = bad.reshape(bad.shape[0], -1).any(axis=1) if bad.size else np.zeros(0, bool)
     if bad.any():
         i = _first_bad_row(bad)
         raise ValueError(f"{name}[{i}] must be finite, got {_fmt(arr[i])}")
