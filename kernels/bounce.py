@@ -6,11 +6,14 @@ were taken. The broken line is exactly as long as the straight one (elastic cont
 cap is reached with path still to go, the sphere stays at its last contact (never inside, never
 through) with its reflected velocity, and is counted as capped.
 
-Resting contacts: a contact whose approach speed is at most ``RESTING_FRAMES`` frames of gravity
-into the surface (``-v.n <= RESTING_FRAMES max(-g.n, 0) dt``) is a support, not a bounce: the
-normal part of the velocity and of the rest of the path is removed and the sphere slides on.
+Resting contacts: a contact whose approach speed is at most ``RESTING_FRAMES_*`` frames of
+gravity into the surface (``-v.n <= RESTING_FRAMES max(-g.n, 0) dt``) is a support, not a
+bounce: the normal part of the velocity and of the rest of the path is removed and the sphere
+slides on.
 This is what keeps a sphere at rest on a floor without jitter or sinking; a bounce that small
-would rise less than ``2 g dt^2`` (5 mm at 60 Hz).
+would rise less than ``2 g dt^2`` (5 mm at 60 Hz). A resting contact is inelastic: the frame
+kernel then takes the energy of the state it ends in (never more than before) instead of
+resetting the speed.
 """
 
 from functools import cache
@@ -24,8 +27,19 @@ from .precision import Precision
 
 wp.set_module_options({"enable_backward": False})
 
-#: Approach speeds up to this many frames of gravity make a resting (sliding) contact.
-RESTING_FRAMES = 2.0
+#: With contact losses, approach speeds up to this many frames of gravity make a resting
+#: (sliding) contact: below that a lossy ball would only decay through sub-frame hops.
+RESTING_FRAMES_LOSSY = 2.0
+
+#: With elastic contacts, a support is a sphere already touching at the frame's start
+#: whose approach this frame's gravity explains (to this many frames of gravity): a sphere at
+#: rest or sliding. An elastic ball that still has a hop in it, however small, keeps it; the
+#: slack above 1 covers rounding and removes at most ``1/2 m (1e-3 g dt)^2`` of energy.
+RESTING_FRAMES_ELASTIC = 1.001
+
+#: "Touching at the start" for an elastic support: a gap along the normal of at most this many
+#: ulps of the coordinates (a sphere put on a floor far from the origin sits a few ulps off it).
+RESTING_GAP_ULPS = 16.0
 
 
 @cache
@@ -50,7 +64,8 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> Sim
     ZERO = scalar(0.0)
     ONE = scalar(1.0)
     TWO = scalar(2.0)
-    REST = scalar(RESTING_FRAMES)
+    REST = scalar(RESTING_FRAMES_LOSSY if lossy else RESTING_FRAMES_ELASTIC)
+    GAP_ULPS = scalar(RESTING_GAP_ULPS * p.eps)
     MAX_BOUNCES = int(max_bounces)
 
     @wp.func
@@ -71,12 +86,14 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> Sim
             fraction of kinetic energy per bounce.
 
         Returns:
-            ``(position, velocity, L, energy, bounces, capped)``: ``bounces`` counts the contacts
-            taken, ``capped`` is 1 when the cap stopped the sphere at its last contact.
+            ``(position, velocity, L, energy, bounces, capped, supported)``: ``bounces`` counts
+            the contacts taken, ``capped`` is 1 when the cap stopped the sphere at its last
+            contact, ``supported`` is 1 when one of them was a resting contact.
         """
         d = v * dt
         bounces = int(0)
         capped = int(0)
+        supported = int(0)
         done = int(0)
         while done == 0:
             box, t, n = nearest_hit(a, d, r, box_center, box_rotation, box_half_extents,
@@ -94,7 +111,13 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> Sim
                     L = friction_spin(L, v, n, r, m, dt, friction, max_rot)
                 vn = wp.dot(v, n)
                 dn = wp.dot(d, n)
-                if -vn <= REST * wp.max(-wp.dot(g, n), ZERO) * dt:
+                resting = -vn <= REST * wp.max(-wp.dot(g, n), ZERO) * dt
+                if wp.static(not lossy):  # elastic: a support touches at the frame's start
+                    gap = t * -dn
+                    scale = wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))
+                    resting = resting and gap <= GAP_ULPS * (scale + wp.length(d))
+                if resting:
+                    supported = 1
                     v = v - vn * n
                     d = (ONE - t) * (d - dn * n)
                 else:
@@ -107,6 +130,6 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> Sim
                         v = v * keep
                         d = d * keep
                 a = contact
-        return a, v, L, energy, bounces, capped
+        return a, v, L, energy, bounces, capped, supported
 
     return SimpleNamespace(bounce_path=bounce_path)

@@ -116,7 +116,7 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         v = velocity_in[i]
         m = mass_in[i]
         zero = vec3(ZERO, ZERO, ZERO)
-        x, v_new, L, energy, bounces, capped = bounce_path(
+        x, v_new, L, energy, bounces, capped, supported = bounce_path(
             position_in[i], v, radius_in[i], m, angular_momentum_in[i], kinetic_energy(m, v),
             zero, zero, dt, friction, max_rot, retention,
             box_center, box_rotation, box_half_extents, box_radius, box_bound)

@@ -19,6 +19,10 @@ wp.set_module_options({"enable_backward": False})
 #: Moment of inertia of a solid sphere, as a fraction of ``m r^2``.
 SOLID_SPHERE_INERTIA = 0.4
 
+#: A kinetic-energy mismatch within this many ulps of ``|E| + |Ep|`` is rounding of ``E - Ep``, not
+#: drift: the reset skips it, so the velocity stays bit for bit (resting spheres stay at zero).
+RESET_ULPS = 8.0
+
 
 @cache
 def dynamics_funcs(p: Precision) -> SimpleNamespace:
@@ -34,6 +38,7 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
     HALF = scalar(0.5)
     TWO = scalar(2.0)
     INERTIA = scalar(SOLID_SPHERE_INERTIA)
+    RESET_SLACK = scalar(RESET_ULPS * p.eps)
 
     @wp.func
     def inertia(m: scalar, r: scalar):
@@ -91,15 +96,19 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
         """``v`` rescaled to ``|v| = sqrt(2 (E - Ep) / m)``, direction kept.
 
         A negative kinetic energy (float error near the top of an arc) gives ``v = 0``: never a
-        NaN. A zero velocity stays zero (it has no direction to keep).
+        NaN. A zero velocity stays zero (it has no direction to keep). A mismatch within the
+        rounding of the energies (``RESET_ULPS``) leaves ``v`` unchanged.
         """
-        kinetic = energy - potential(m, g, position, origin)
+        ep = potential(m, g, position, origin)
+        kinetic = energy - ep
         speed = wp.length(v)
         out = v
         if kinetic <= ZERO:
             out = vec3(ZERO, ZERO, ZERO)
         elif speed > ZERO:
-            out = v * (wp.sqrt(TWO * kinetic / m) / speed)
+            mismatch = wp.abs(kinetic - HALF * m * speed * speed)
+            if mismatch > RESET_SLACK * (wp.abs(energy) + wp.abs(ep)):
+                out = v * (wp.sqrt(TWO * kinetic / m) / speed)
         return out
 
     @wp.func

@@ -2,7 +2,17 @@
 
 Per sphere (SPEC "Dynamics of one frame"): gravity by semi-implicit Euler (``v += g dt``), the
 move by the bounce loop, the speed reset from the energy invariant, and the orientation from the
-rotation vector. Variants come from :func:`frame_kernel`, keyed by what the scene needs, so a
+rotation vector.
+
+Energy convention: the stored velocity ``v`` is semi-implicit Euler's step velocity (the one the
+last move used, the mean velocity over that frame); the velocity at the frame's end is
+``u = v + g dt / 2``, and the energy is ``E = 1/2 m |u|^2 - m g . (p - origin)``. Semi-implicit
+Euler conserves this ``E`` exactly in free flight (``E(x1, u1) - E(x0, u0) = 0`` identically), so
+the reset of ``|u|`` from ``E`` is the identity there: it corrects contact and rounding drift and
+nothing else. Resetting ``|v|`` itself (the sheet's literal rule) puts back ``1/2 m g^2 dt^2``
+every frame: balls hover at the top of their arc and free flight speeds up sideways.
+
+Variants come from :func:`frame_kernel`, keyed by what the scene needs, so a
 scene without spin runs a kernel with no spin code in it.
 """
 
@@ -11,7 +21,7 @@ from functools import cache
 import warp as wp
 
 from .bounce import bounce_funcs
-from .dynamics import dynamics_funcs
+from .dynamics import RESET_ULPS, dynamics_funcs
 from .precision import precision
 
 wp.set_module_options({"enable_backward": False})
@@ -37,9 +47,13 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
     dyn = dynamics_funcs(p)
     speed_from_energy = dyn.speed_from_energy
     limit_speed_to_energy = dyn.limit_speed_to_energy
+    kinetic_energy = dyn.kinetic_energy
+    potential = dyn.potential
     rotation_vector = dyn.rotation_vector
     inertia = dyn.inertia
     integrate_orientation = dyn.integrate_orientation
+    HALF = scalar(0.5)
+    RESET_SLACK = scalar(RESET_ULPS * p.eps)
 
     @wp.kernel(module="unique")
     def advance_frame(
@@ -80,13 +94,24 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         if wp.static(spin):
             L = angular_momentum_in[i]
         v = velocity_in[i] + gravity * dt
-        x, v, L, energy, bounces, capped = bounce_path(
+        x, v, L, energy, bounces, capped, supported = bounce_path(
             position_in[i], v, r, m, L, energy, gravity, origin, dt, friction, max_rot,
             retention, box_center, box_rotation, box_half_extents, box_radius, box_bound)
-        if wp.static(energy_correction):
-            v = speed_from_energy(v, energy, m, gravity, x, origin)
+        # The energy is that of the velocity at the frame's end, v + g dt / 2 (the stored v is
+        # semi-implicit Euler's step velocity): semi-implicit Euler keeps that energy exactly
+        # in free flight, so the reset changes nothing there and only removes drift.
+        half_kick = gravity * (HALF * dt)
+        if supported == 1:
+            # a resting contact is inelastic: keep the state and take its energy when that is
+            # lower by more than rounding (never more; no ratchet on rounding either)
+            ep = potential(m, gravity, x, origin)
+            state_energy = kinetic_energy(m, v + half_kick) + ep
+            if energy - state_energy > RESET_SLACK * (wp.abs(energy) + wp.abs(ep)):
+                energy = state_energy
+        elif wp.static(energy_correction):
+            v = speed_from_energy(v + half_kick, energy, m, gravity, x, origin) - half_kick
         else:
-            v = limit_speed_to_energy(v, energy, m, gravity, x, origin)
+            v = limit_speed_to_energy(v + half_kick, energy, m, gravity, x, origin) - half_kick
         position_out[i] = x
         velocity_out[i] = v
         energy_out[i] = energy

@@ -23,10 +23,14 @@ class State:
 
     Attributes:
         frame: frames advanced since the start.
-        position: centres [m], (N, 3). velocity: [m/s], (N, 3).
+        position: centres [m], (N, 3).
+        velocity: semi-implicit Euler's step velocity [m/s], (N, 3): the one the last frame
+            moved with (its mean velocity), and the one the next frame's gravity kick adds to.
+            The velocity at the frame's end is ``velocity + g dt / 2``.
         angular_momentum: [kg m^2/s], (N, 3). orientation: (x, y, z, w), body -> world, (N, 4).
-        energy: total energy ``1/2 m |v|^2 - m g . (p - origin)`` [J], (N,), the per-sphere
-            invariant the speed is reset from (see :attr:`Simulator.energy_origin`).
+        energy: total energy ``1/2 m |v + g dt/2|^2 - m g . (p - origin)`` [J], (N,), the
+            per-sphere invariant the speed is reset from (see :attr:`Simulator.energy_origin`);
+            constant but for the contact losses.
     """
 
     frame: int
@@ -43,7 +47,8 @@ class Stats:
 
     Attributes:
         frames: frames advanced. sphere_frames: frames times spheres.
-        bounces: contacts taken, all spheres. capped: sphere-frames stopped by ``max_bounces``.
+        bounces: contacts taken, all spheres (resting contacts on a support included).
+        capped: sphere-frames stopped by ``max_bounces``.
         capped_spheres: spheres stopped by the cap at least once.
         seconds: wall time spent in :meth:`Simulator.step` and :meth:`Simulator.run` [s].
     """
@@ -113,8 +118,10 @@ class Simulator:
         p = precision(self.precision)
         dev = self.device
         g = self.scene.gravity
-        energy = (0.5 * swarm.mass * np.einsum("ij,ij->i", swarm.velocity, swarm.velocity)
-                  - swarm.mass * ((swarm.position - self.energy_origin) @ g))
+        # the energy of the state the device holds: positions and velocities rounded to the
+        # kernels' precision first, so that E and Ep agree to rounding from the first frame
+        energy = self._energy_of(swarm.position.astype(p.np_dtype).astype(np.float64),
+                                 swarm.velocity.astype(p.np_dtype).astype(np.float64))
         self._p = p
         self._boxes = DeviceBoxes.upload(self.scene.boxes, p, dev)
         self._radius = to_device(swarm.radius, p.scalar, p, dev)
@@ -216,13 +223,19 @@ class Simulator:
         return self._initial_energy.copy()
 
     def mechanical_energy(self, state: State | None = None) -> np.ndarray:
-        """``1/2 m |v|^2 - m g . (p - origin)`` of a state [J], (N,), in float64."""
+        """Total energy of a state [J], (N,), computed in float64 from its position and velocity.
+
+        ``1/2 m |u|^2 - m g . (p - origin)`` with ``u = v + g dt / 2``, the velocity at the
+        frame's end (see :class:`State`); compare with :attr:`initial_energy`.
+        """
         s = self.state() if state is None else state
-        m = self.mass
-        v = s.velocity.astype(np.float64)
-        x = s.position.astype(np.float64)
-        return 0.5 * m * np.einsum("ij,ij->i", v, v) - m * ((x - self.energy_origin)
-                                                             @ self.scene.gravity)
+        return self._energy_of(s.position.astype(np.float64), s.velocity.astype(np.float64))
+
+    def _energy_of(self, position: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        g = self.scene.gravity
+        u = velocity + 0.5 * self.dt * g
+        return (0.5 * self.mass * np.einsum("ij,ij->i", u, u)
+                - self.mass * ((position - self.energy_origin) @ g))
 
     @property
     def stats(self) -> Stats:
