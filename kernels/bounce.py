@@ -74,7 +74,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> Sim
                     retention: scalar,
                     box_center: wp.array(dtype=p.vec3), box_rotation: wp.array(dtype=p.mat33),
                     box_half_extents: wp.array(dtype=p.vec3),
-                    box_radius: wp.array(dtype=p.scalar), box_bound: wp.array(dtype=p.scalar)):
+                    box_radius: wp.array(dtype=p.scalar), box_extent: wp.array(dtype=p.vec3)):
         """Move a sphere for one frame among the boxes, bouncing up to ``MAX_BOUNCES`` times.
 
         Args:
@@ -97,7 +97,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> Sim
         done = int(0)
         while done == 0:
             box, t, n = nearest_hit(a, d, r, box_center, box_rotation, box_half_extents,
-                                    box_radius, box_bound)
+                                    box_radius, box_extent)
             if box < 0:
                 a = a + d
                 done = 1

@@ -34,7 +34,7 @@ def collide_kernel(precision_name: str):
         box_rotation: wp.array(dtype=mat33),
         box_half_extents: wp.array(dtype=vec3),
         box_radius: wp.array(dtype=scalar),
-        box_bound: wp.array(dtype=scalar),
+        box_extent: wp.array(dtype=vec3),
         dt: scalar,
         # In:
         position_in: wp.array(dtype=vec3),
@@ -53,7 +53,7 @@ def collide_kernel(precision_name: str):
         v = velocity_in[i]
         d = v * dt
         box, t, n = nearest_hit(a, d, radius_in[i], box_center, box_rotation,
-                                box_half_extents, box_radius, box_bound)
+                                box_half_extents, box_radius, box_extent)
         contact = a + t * d
         new_v = v
         new_p = contact
@@ -94,7 +94,7 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         box_rotation: wp.array(dtype=mat33),
         box_half_extents: wp.array(dtype=vec3),
         box_radius: wp.array(dtype=scalar),
-        box_bound: wp.array(dtype=scalar),
+        box_extent: wp.array(dtype=vec3),
         dt: scalar,
         friction: scalar,
         max_rot: scalar,
@@ -119,7 +119,7 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         x, v_new, L, energy, bounces, capped, supported = bounce_path(
             position_in[i], v, radius_in[i], m, angular_momentum_in[i], kinetic_energy(m, v),
             zero, zero, dt, friction, max_rot, retention,
-            box_center, box_rotation, box_half_extents, box_radius, box_bound)
+            box_center, box_rotation, box_half_extents, box_radius, box_extent)
         bounces_out[i] = bounces
         capped_out[i] = capped
         position_out[i] = x

@@ -62,7 +62,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         box_rotation: wp.array(dtype=mat33),
         box_half_extents: wp.array(dtype=vec3),
         box_radius: wp.array(dtype=scalar),
-        box_bound: wp.array(dtype=scalar),
+        box_extent: wp.array(dtype=vec3),
         gravity: vec3,
         origin: vec3,
         dt: scalar,
@@ -96,7 +96,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         v = velocity_in[i] + gravity * dt
         x, v, L, energy, bounces, capped, supported = bounce_path(
             position_in[i], v, r, m, L, energy, gravity, origin, dt, friction, max_rot,
-            retention, box_center, box_rotation, box_half_extents, box_radius, box_bound)
+            retention, box_center, box_rotation, box_half_extents, box_radius, box_extent)
         # The energy is that of the velocity at the frame's end, v + g dt / 2 (the stored v is
         # semi-implicit Euler's step velocity): semi-implicit Euler keeps that energy exactly
         # in free flight, so the reset changes nothing there and only removes drift.

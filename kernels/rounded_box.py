@@ -135,70 +135,71 @@ def rounded_box_funcs(p: Precision) -> SimpleNamespace:
         hit = int(0)
         t = ONE
         normal = vec3(ZERO, ZERO, ZERO)
-        touching, moving_in, n0 = start_contact(a, d, h, radius)
-        if touching == 1:
+        g = h + vec3(radius, radius, radius)
+        slab_hit, t_enter, t_exit, axis = segment_slab(a, d, g)
+        touching = int(0)
+        if slab_hit == 1 and t_enter <= ZERO:
+            # only a start inside the grown box can be on or in the rounded box
+            touching, moving_in, n0 = start_contact(a, d, h, radius)
             if moving_in == 1:
                 hit = 1
                 t = ZERO
                 normal = n0
-        else:
-            g = h + vec3(radius, radius, radius)
-            slab_hit, t_enter, t_exit, axis = segment_slab(a, d, g)
-            if slab_hit == 1:
-                t_entry = wp.max(t_enter, ZERO)
-                pe = a + t_entry * d
-                # Region of the entry point: which core slabs it lies outside of. The entry
-                # face counts as outside (its coordinate is h + R, or h when R = 0).
-                outside = int(0)
-                out_axis = int(0)
-                for i in range(3):
-                    if i == axis or wp.abs(pe[i]) > h[i]:
-                        outside += 1
-                    else:
-                        out_axis = i  # with 2 outside, the one inside is the edge direction
-                scale = wp.max(wp.max(g[0], g[1]), wp.max(g[2], wp.length(a)))
-                if outside <= 1 or radius <= SHARP_REL * scale:
-                    # Face region (or sharp box): the grown-OBB entry is the contact.
-                    k = axis
-                    s = ONE
-                    if k >= 0:
-                        s = -sign_of(d[k])  # crossing the plane facing the motion
-                    else:
-                        # starts inside the grown box but outside the rounded one (rounding):
-                        # the face it sticks out of the most.
-                        k = int(0)
-                        best = wp.abs(pe[0]) - h[0]
-                        for i in range(1, 3):
-                            if wp.abs(pe[i]) - h[i] > best:
-                                best = wp.abs(pe[i]) - h[i]
-                                k = i
-                        s = sign_of(pe[k])
-                    hit = 1
-                    t = t_entry
-                    normal = unit_axis(k, s)
-                elif outside == 2:
-                    corner = vec3(ZERO, ZERO, ZERO)
-                    for i in range(3):
-                        if i != out_axis:
-                            corner[i] = sign_of(pe[i]) * h[i]
-                    e0 = corner
-                    e1 = corner
-                    e0[out_axis] = -h[out_axis]
-                    e1[out_axis] = h[out_axis]
-                    hit, t, normal = segment_capsule(a, d, e0, e1, radius)
+        if slab_hit == 1 and touching == 0:
+            t_entry = wp.max(t_enter, ZERO)
+            pe = a + t_entry * d
+            # Region of the entry point: which core slabs it lies outside of. The entry
+            # face counts as outside (its coordinate is h + R, or h when R = 0).
+            outside = int(0)
+            out_axis = int(0)
+            for i in range(3):
+                if i == axis or wp.abs(pe[i]) > h[i]:
+                    outside += 1
                 else:
-                    corner = vec3(sign_of(pe[0]) * h[0], sign_of(pe[1]) * h[1],
-                                  sign_of(pe[2]) * h[2])
-                    for i in range(3):
-                        other = corner
-                        other[i] = -corner[i]
-                        hit_i, t_i, n_i = segment_capsule(a, d, corner, other, radius)
-                        hit, t, normal = closer(hit, t, normal, hit_i, t_i, n_i)
-                if hit == 1 and wp.dot(d, normal) >= ZERO:
-                    hit = 0
-                if hit == 0:
-                    t = ONE
-                    normal = vec3(ZERO, ZERO, ZERO)
+                    out_axis = i  # with 2 outside, the one inside is the edge direction
+            scale = wp.max(wp.max(g[0], g[1]), wp.max(g[2], wp.length(a)))
+            if outside <= 1 or radius <= SHARP_REL * scale:
+                # Face region (or sharp box): the grown-OBB entry is the contact.
+                k = axis
+                s = ONE
+                if k >= 0:
+                    s = -sign_of(d[k])  # crossing the plane facing the motion
+                else:
+                    # starts inside the grown box but outside the rounded one (rounding):
+                    # the face it sticks out of the most.
+                    k = int(0)
+                    best = wp.abs(pe[0]) - h[0]
+                    for i in range(1, 3):
+                        if wp.abs(pe[i]) - h[i] > best:
+                            best = wp.abs(pe[i]) - h[i]
+                            k = i
+                    s = sign_of(pe[k])
+                hit = 1
+                t = t_entry
+                normal = unit_axis(k, s)
+            elif outside == 2:
+                corner = vec3(ZERO, ZERO, ZERO)
+                for i in range(3):
+                    if i != out_axis:
+                        corner[i] = sign_of(pe[i]) * h[i]
+                e0 = corner
+                e1 = corner
+                e0[out_axis] = -h[out_axis]
+                e1[out_axis] = h[out_axis]
+                hit, t, normal = segment_capsule(a, d, e0, e1, radius)
+            else:
+                corner = vec3(sign_of(pe[0]) * h[0], sign_of(pe[1]) * h[1],
+                              sign_of(pe[2]) * h[2])
+                for i in range(3):
+                    other = corner
+                    other[i] = -corner[i]
+                    hit_i, t_i, n_i = segment_capsule(a, d, corner, other, radius)
+                    hit, t, normal = closer(hit, t, normal, hit_i, t_i, n_i)
+            if hit == 1 and wp.dot(d, normal) >= ZERO:
+                hit = 0
+            if hit == 0:
+                t = ONE
+                normal = vec3(ZERO, ZERO, ZERO)
         return hit, t, normal
 
     return SimpleNamespace(rounded_box_distance=rounded_box_distance,

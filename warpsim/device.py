@@ -29,14 +29,15 @@ class DeviceBoxes:
         rotation: local -> world rotation matrices, shape (K,).
         half_extents: core half extents [m], local frame, shape (K,).
         radius: rounding radii [m], shape (K,).
-        bound: bounding-sphere radii ``|h| + rb`` [m], shape (K,), for the cheap reject.
+        extent: half sizes of the boxes' world-axis-aligned bounding boxes [m], shape (K,),
+            for the cheap reject.
     """
 
     center: wp.array
     rotation: wp.array
     half_extents: wp.array
     radius: wp.array
-    bound: wp.array
+    extent: wp.array
 
     @classmethod
     def upload(cls, boxes: RoundedBoxes, p: Precision, device) -> DeviceBoxes:
@@ -46,11 +47,11 @@ class DeviceBoxes:
             rotation=wp.array(boxes.rotation_matrices().astype(dt), dtype=p.mat33, device=device),
             half_extents=wp.array(boxes.half_extents.astype(dt), dtype=p.vec3, device=device),
             radius=wp.array(boxes.radius.astype(dt), dtype=p.scalar, device=device),
-            bound=wp.array(boxes.bounding_radius().astype(dt), dtype=p.scalar, device=device),
+            extent=wp.array(boxes.world_extent().astype(dt), dtype=p.vec3, device=device),
         )
 
     def inputs(self) -> list:
-        return [self.center, self.rotation, self.half_extents, self.radius, self.bound]
+        return [self.center, self.rotation, self.half_extents, self.radius, self.extent]
 
 
 def to_device(values: np.ndarray, dtype, p: Precision, device) -> wp.array:

@@ -10,7 +10,7 @@ with a Python loop over the ``K`` boxes. Per box, in the box's local frame (``a_
 3. the entry point's region picks the answer: a face (the entry is the hit), one edge capsule,
    or the three capsules meeting at a corner (the nearest is kept);
 4. a contact counts only when ``d . n < 0``; over the boxes the smallest ``t`` wins (ties: the
-   lower index), after a cheap bounding-sphere reject.
+   lower index), after a cheap bounding-box reject.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ PARALLEL_ULPS = 1.0
 #: resolvable.
 SHARP_ULPS = 16.0
 
-#: Relative slack on the bounding-sphere reject, so rounding in the segment-to-centre distance
+#: Relative slack on the bounding-box reject, so rounding in the bounds
 #: never rejects a box the segment touches (it only lets a few more boxes to the exact test).
 REJECT_SLACK = 1.0e-3
 
@@ -283,20 +283,17 @@ def sweep_boxes_numpy(position, velocity, radius, boxes: RoundedBoxes | RoundedB
     centers = boxes.center.astype(dtype)
     half_extents = boxes.half_extents.astype(dtype)
     box_radius = boxes.radius.astype(dtype)
-    bound = boxes.bounding_radius().astype(dtype)
+    extent = boxes.world_extent().astype(dtype)
 
     best_t = np.full(n, np.inf, dtype=dtype)
     best_box = np.full(n, -1, dtype=np.int32)
     best_n = np.zeros((n, 3), dtype=dtype)
-    dd = _dot(d, d)
     for k in range(len(boxes)):
-        # Cheap reject: the segment stays outside the box's bounding sphere grown by r.
-        w = centers[k] - a
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.where(dd > 0, np.clip(_dot(w, d) / dd, 0, 1), 0).astype(dtype)
-        e = w - s[:, None] * d
-        reach = (bound[k] + rad) * dtype.type(1 + REJECT_SLACK)
-        near = np.flatnonzero(_dot(e, e) <= reach * reach)
+        # Cheap reject: the segment's world bounding box and the box's, grown by r, are apart.
+        mid = a + dtype.type(0.5) * d - centers[k]
+        reach = (extent[k] + rad[:, None]) * dtype.type(1 + REJECT_SLACK) \
+            + dtype.type(0.5) * np.abs(d)
+        near = np.flatnonzero((np.abs(mid) <= reach).all(axis=1))
         if near.size == 0:
             continue
         m = rotations[k]

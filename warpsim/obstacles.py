@@ -162,6 +162,11 @@ class RoundedBoxes:
         """Radius of the sphere about each centre that holds the whole rounded box [m], (K,)."""
         return np.linalg.norm(self.half_extents, axis=1) + self.radius
 
+    def world_extent(self) -> np.ndarray:
+        """Half sizes of each rounded box's world-axis-aligned bounding box [m], (K, 3)."""
+        return (np.einsum("kij,kj->ki", np.abs(self.rotation_matrices()), self.half_extents)
+                + self.radius[:, None])
+
     def signed_distance(self, points) -> np.ndarray:
         """Signed distance [m] from world points ``(P, 3)`` to every box, shape (P, K).
 
