@@ -468,9 +468,9 @@ def test_inputs_are_never_mutated():
 
 
 def test_documented_example_loads_and_spawns(tmp_path):
-    doc = Path(__file__).resolve().parents[1] / "docs" / "scene-format.md"
+    doc = Path(__file__).resolve().parents[1] / "README.md"
     if not doc.is_file():
-        pytest.skip("docs/ not present (installed package)")
+        pytest.skip("README.md not present (installed package)")
     blocks = re.findall(r"```toml\n(.*?)```", doc.read_text(encoding="utf-8"), flags=re.S)
     assert len(blocks) == 1
     scene = load_scene(write(tmp_path, blocks[0], "example.toml"))

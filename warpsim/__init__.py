@@ -10,9 +10,10 @@ if _wp.config.log_level <= _wp.LOG_INFO:  # no banner nor per-module build lines
     _wp.config.log_level = _wp.LOG_WARNING
 
 from .collide import Bounces, Contacts, bounce, collide_box, collide_boxes
+from .emitter import Emitter
 from .obstacles import RoundedBox, RoundedBoxes
 from .scene import Scene
-from .scene_files import list_scenes
+from .scene_files import SceneFileError, list_scenes
 from .simulator import Simulator, State, Stats
 from .swarm import Swarm
 from .trajectory import Trajectory
@@ -20,12 +21,14 @@ from .trajectory import Trajectory
 __all__ = [
     "Bounces",
     "Contacts",
+    "Emitter",
     "bounce",
     "collide_box",
     "collide_boxes",
     "RoundedBox",
     "RoundedBoxes",
     "Scene",
+    "SceneFileError",
     "Simulator",
     "State",
     "Stats",

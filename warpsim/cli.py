@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -97,13 +96,16 @@ def _energy_drift(sim, state) -> float:
 def _cmd_run(args) -> int:
     import warpsim as ws
 
+    from . import validation as check
+
     scene = ws.Scene.load(args.scene)
     swarm = scene.spawn(n=args.spheres, seed=args.seed)
-    frames = scene.frames if args.frames is None else args.frames
+    frames = check.positive_int("frames", scene.frames if args.frames is None else args.frames)
+    check.positive_int("every", args.every)
     out = Path(args.output if args.output else f"{scene.name}.usdc")
     if out.suffix not in (".usdc", ".usda"):
         raise ValueError(f"output must end in .usdc or .usda, got {str(out)!r}")
-    if not out.parent.exists():
+    if not out.parent.is_dir():
         raise ValueError(f"output directory {str(out.parent)!r} does not exist")
     sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
                        device=args.device, precision=args.precision)
@@ -113,22 +115,14 @@ def _cmd_run(args) -> int:
     print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {frames} frames "
           f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
           f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
-    start = time.perf_counter()
-    sim.step(1)  # builds (or loads) the kernel: reported apart from the run's speed
-    build = time.perf_counter() - start
-    traj = sim.run(frames - 1, every=args.every, progress=not args.no_progress) \
-        if frames > 1 else None
+    build = sim.build()  # reported apart from the run's speed
+    traj = sim.run(frames, every=args.every, progress=not args.no_progress)
     state = sim.state()
     stats = sim.stats
-    if traj is None:
-        traj = ws.Trajectory(frame=np.array([sim.frame]), dt=sim.dt,
-                             position=state.position[None], orientation=state.orientation[None],
-                             radius=swarm.radius.copy())
     path = export.write_usd(out, scene, traj, max_bytes=args.max_bytes)
-    run_seconds = max(stats.seconds - build, 1e-9)
     print(f"simulated {stats.frames} frames x {len(swarm)} spheres in {stats.seconds:.2f} s "
           f"(kernel build {build:.2f} s): "
-          f"{(stats.sphere_frames - len(swarm)) / run_seconds:,.0f} sphere-frames/s")
+          f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
     print(f"bounces: {stats.bounces:,} ({stats.bounces / max(stats.sphere_frames, 1):.3f} per "
           f"sphere-frame); capped: {stats.capped:,} sphere-frames, {stats.capped_spheres} spheres")
     print(f"energy drift: {_energy_drift(sim, state):.2e} (largest per sphere, relative)")
