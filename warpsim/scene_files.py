@@ -1,6 +1,6 @@
 """Scene files (TOML): reading bundled and user scenes into :class:`warpsim.Scene`.
 
-The format is documented in ``docs/scene-format.md``. In short: top-level ``name`` and
+The format is documented in the README ("Scene files"). In short: top-level ``name`` and
 ``description``, optional ``[simulation]`` and ``[physics]`` tables, obstacles as ``[[box]]`` and
 ``[[box_grid]]`` tables, and one ``[emitter]`` table (see :class:`warpsim.emitter.Emitter`).
 

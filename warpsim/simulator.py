@@ -140,7 +140,7 @@ class Simulator:
         self._orientation = pair(swarm.orientation, p.quat, self.spin)
         self._bounce_count = wp.zeros(self._n, dtype=wp.int32, device=dev)
         self._capped_count = wp.zeros(self._n, dtype=wp.int32, device=dev)
-        self._initial_energy = energy.astype(p.np_dtype)
+        self._initial_energy = energy
         self._params = [p.vec3(*g), p.vec3(*self.energy_origin), p.scalar(self.dt),
                         p.scalar(self.scene.friction), p.scalar(self.scene.max_angular_speed),
                         p.scalar(self.scene.energy_retention)]
@@ -229,7 +229,8 @@ class Simulator:
 
     @property
     def initial_energy(self) -> np.ndarray:
-        """Per-sphere total energy at the start [J], (N,) (see :class:`State`)."""
+        """Per-sphere total energy at the start [J], (N,), float64 (see :class:`State`); the
+        device holds it rounded to the kernels' precision."""
         return self._initial_energy.copy()
 
     def mechanical_energy(self, state: State | None = None) -> np.ndarray:
