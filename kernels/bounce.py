@@ -22,7 +22,7 @@ from types import SimpleNamespace
 import warp as wp
 
 from .dynamics import dynamics_funcs
-from .nearest import nearest_funcs
+from .nearest import model_nearest_hit
 from .precision import Precision
 
 wp.set_module_options({"enable_backward": False})
@@ -43,7 +43,8 @@ RESTING_GAP_ULPS = 16.0
 
 
 @cache
-def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> SimpleNamespace:
+def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
+                 broad_phase: bool) -> SimpleNamespace:
     """Build the bounce loop for one precision and one feature set.
 
     Args:
@@ -52,12 +53,13 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> Sim
         spin: update the angular momentum from contact friction (else ``L`` passes through
             untouched and no spin code is compiled).
         lossy: apply ``energy_retention`` at each bounce (else no loss code is compiled).
+        broad_phase: find each contact with the BVH query (else the loop over all boxes).
 
     Returns:
         Namespace with ``bounce_path``.
     """
     scalar, vec3 = p.scalar, p.vec3
-    nearest_hit = nearest_funcs(p).nearest_hit
+    nearest_hit = model_nearest_hit(p, broad_phase)
     dyn = dynamics_funcs(p)
     friction_spin = dyn.friction_spin
     potential = dyn.potential
@@ -74,7 +76,8 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> Sim
                     retention: scalar,
                     box_center: wp.array(dtype=p.vec3), box_rotation: wp.array(dtype=p.mat33),
                     box_half_extents: wp.array(dtype=p.vec3),
-                    box_radius: wp.array(dtype=p.scalar), box_extent: wp.array(dtype=p.vec3)):
+                    box_radius: wp.array(dtype=p.scalar), box_extent: wp.array(dtype=p.vec3),
+                    box_bvh: wp.uint64):
         """Move a sphere for one frame among the boxes, bouncing up to ``MAX_BOUNCES`` times.
 
         Args:
@@ -83,7 +86,8 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> Sim
             ``dynamics``). g: gravity [m/s^2] (only for resting contacts and the loss's
             potential). origin: potential reference point [m]. dt: frame duration [s].
             friction: ``k_f`` [kg/s]. max_rot: ``|Rot|`` clamp [rad/s]. retention: kept
-            fraction of kinetic energy per bounce.
+            fraction of kinetic energy per bounce. box_*: the obstacles (see ``nearest``);
+            ``box_bvh``: the BVH over them (read only with ``broad_phase``).
 
         Returns:
             ``(position, velocity, L, energy, bounces, capped, supported)``: ``bounces`` counts
@@ -97,7 +101,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool) -> Sim
         done = int(0)
         while done == 0:
             box, t, n = nearest_hit(a, d, r, box_center, box_rotation, box_half_extents,
-                                    box_radius, box_extent)
+                                    box_radius, box_extent, box_bvh)
             if box < 0:
                 a = a + d
                 done = 1

@@ -7,23 +7,25 @@ import warp as wp
 
 from .bounce import bounce_funcs
 from .dynamics import dynamics_funcs
-from .nearest import nearest_funcs
+from .nearest import model_nearest_hit
 from .precision import precision
 
 wp.set_module_options({"enable_backward": False})
 
 
 @cache
-def collide_kernel(precision_name: str):
-    """The nearest-contact kernel (sheet methods 1 and 2) for one precision.
+def collide_kernel(precision_name: str, broad_phase: bool):
+    """The nearest-contact kernel (sheet methods 1 and 2) for one precision and broad phase.
 
     Per sphere: the centre would move from ``A`` to ``B = A + v dt``; the kernel finds the first
     contact over all boxes and writes the SPEC results. Rows without a contact hold ``box = -1``,
     ``t = 1``, ``position = new_position = B``, ``normal = 0`` and ``new_velocity = v``.
+    With ``broad_phase`` the candidates come from the BVH ``box_bvh`` (bit-identical results),
+    else every box is tried and ``box_bvh`` is not read.
     """
     p = precision(precision_name)
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
-    nearest_hit = nearest_funcs(p).nearest_hit
+    nearest_hit = model_nearest_hit(p, broad_phase)
     TWO = scalar(2.0)
     ONE = scalar(1.0)
 
@@ -35,6 +37,7 @@ def collide_kernel(precision_name: str):
         box_half_extents: wp.array(dtype=vec3),
         box_radius: wp.array(dtype=scalar),
         box_extent: wp.array(dtype=vec3),
+        box_bvh: wp.uint64,
         dt: scalar,
         # In:
         position_in: wp.array(dtype=vec3),
@@ -53,7 +56,7 @@ def collide_kernel(precision_name: str):
         v = velocity_in[i]
         d = v * dt
         box, t, n = nearest_hit(a, d, radius_in[i], box_center, box_rotation,
-                                box_half_extents, box_radius, box_extent)
+                                box_half_extents, box_radius, box_extent, box_bvh)
         contact = a + t * d
         new_v = v
         new_p = contact
@@ -74,16 +77,18 @@ def collide_kernel(precision_name: str):
 
 
 @cache
-def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool):
+def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool,
+                  broad_phase: bool):
     """The multi-bounce kernel (sheet method 3) for one feature set, without gravity.
 
     Per sphere: the bounce loop over the frame's straight-line displacement ``v dt``. Outputs the
     number of contacts taken, whether the cap stopped the sphere, and the new position, velocity
     and angular momentum (the sheet's third prototype, its by-value output fixed).
+    ``broad_phase`` as in :func:`collide_kernel`.
     """
     p = precision(precision_name)
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
-    bounce_path = bounce_funcs(p, max_bounces, spin, lossy).bounce_path
+    bounce_path = bounce_funcs(p, max_bounces, spin, lossy, broad_phase).bounce_path
     kinetic_energy = dynamics_funcs(p).kinetic_energy
     ZERO = scalar(0.0)
 
@@ -95,6 +100,7 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         box_half_extents: wp.array(dtype=vec3),
         box_radius: wp.array(dtype=scalar),
         box_extent: wp.array(dtype=vec3),
+        box_bvh: wp.uint64,
         dt: scalar,
         friction: scalar,
         max_rot: scalar,
@@ -119,7 +125,7 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         x, v_new, L, energy, bounces, capped, supported = bounce_path(
             position_in[i], v, radius_in[i], m, angular_momentum_in[i], kinetic_energy(m, v),
             zero, zero, dt, friction, max_rot, retention,
-            box_center, box_rotation, box_half_extents, box_radius, box_extent)
+            box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh)
         bounces_out[i] = bounces
         capped_out[i] = capped
         position_out[i] = x

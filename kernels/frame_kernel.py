@@ -29,7 +29,7 @@ wp.set_module_options({"enable_backward": False})
 
 @cache
 def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_correction: bool,
-                 lossy: bool):
+                 lossy: bool, broad_phase: bool):
     """Build the frame kernel for one feature set.
 
     Args:
@@ -40,10 +40,12 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         energy_correction: reset ``|v|`` from the energy after the move; without it the speed
             is only ever lowered to the energy bound, so energy is never gained either way.
         lossy: ``energy_retention < 1``.
+        broad_phase: find contacts with the BVH ``box_bvh`` (else every box is tried and
+            ``box_bvh`` is not read); the results are bit-identical either way.
     """
     p = precision(precision_name)
     scalar, vec3, mat33, quat = p.scalar, p.vec3, p.mat33, p.quat
-    bounce_path = bounce_funcs(p, max_bounces, spin, lossy).bounce_path
+    bounce_path = bounce_funcs(p, max_bounces, spin, lossy, broad_phase).bounce_path
     dyn = dynamics_funcs(p)
     speed_from_energy = dyn.speed_from_energy
     limit_speed_to_energy = dyn.limit_speed_to_energy
@@ -63,6 +65,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         box_half_extents: wp.array(dtype=vec3),
         box_radius: wp.array(dtype=scalar),
         box_extent: wp.array(dtype=vec3),
+        box_bvh: wp.uint64,
         gravity: vec3,
         origin: vec3,
         dt: scalar,
@@ -96,7 +99,8 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         v = velocity_in[i] + gravity * dt
         x, v, L, energy, bounces, capped, supported = bounce_path(
             position_in[i], v, r, m, L, energy, gravity, origin, dt, friction, max_rot,
-            retention, box_center, box_rotation, box_half_extents, box_radius, box_extent)
+            retention, box_center, box_rotation, box_half_extents, box_radius, box_extent,
+            box_bvh)
         # The energy is that of the velocity at the frame's end, v + g dt / 2 (the stored v is
         # semi-implicit Euler's step velocity): semi-implicit Euler keeps that energy exactly
         # in free flight, so the reset changes nothing there and only removes drift.

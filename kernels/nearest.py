@@ -3,8 +3,10 @@
 Obstacles are passed as struct-of-arrays (``# Model`` data): centre, rotation matrix (local ->
 world), core half extents, rounding radius and the half size of the world-axis-aligned bounding
 box (precomputed on the host). :func:`sweep_box_world` is the per-candidate step;
-:func:`nearest_hit` feeds it every box (brute force, right for small groups), and another
-candidate source (a BVH query) can feed the same step.
+:func:`nearest_hit` feeds it every box (brute force, right for small groups) and
+:func:`nearest_hit_bvh` feeds it the boxes a BVH query returns (many boxes). Both keep the same
+first contact: the BVH only skips boxes the per-box reject would have refused anyway, and the
+tie rule (the lower box index) is explicit, so the two are bit-identical.
 """
 
 
@@ -22,13 +24,22 @@ wp.set_module_options({"enable_backward": False})
 #: the segment touches (it only lets a few more boxes through to the exact test).
 REJECT_SLACK = 1.0e-3
 
+#: Relative pad on the BVH's bounds and queries, well above float32's ulp (1.2e-7): rounding in
+#: the per-box reject and in the float64 -> float32 bounds can never make the BVH drop a box the
+#: reject would let through.
+BOUNDS_PAD_REL = 1.0e-6
+
+#: Absolute pad [m] on the BVH queries, for coordinates at or near zero, where the relative pad
+#: vanishes (above float32's smallest subnormal, so the outward rounding still holds).
+BOUNDS_PAD_ABS = 1.0e-30
+
 
 @cache
 def nearest_funcs(p: Precision) -> SimpleNamespace:
     """Build the group-query ``@wp.func``s for one precision.
 
     Returns:
-        Namespace with ``sweep_box_world`` and ``nearest_hit``.
+        Namespace with ``sweep_box_world``, ``nearest_hit`` and ``nearest_hit_bvh``.
     """
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     sweep_rounded_box = rounded_box_funcs(p).sweep_rounded_box
@@ -36,6 +47,8 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
     ONE = scalar(1.0)
     SLACK = scalar(1.0 + REJECT_SLACK)
     HALF = scalar(0.5)
+    PAD_REL = scalar(BOUNDS_PAD_REL)
+    PAD_ABS = scalar(BOUNDS_PAD_ABS)
 
     @wp.func
     def sweep_box_world(a: vec3, d: vec3, r: scalar, center: vec3, rotation: mat33,
@@ -86,4 +99,83 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
                 best_n = normal
         return best, best_t, best_n
 
-    return SimpleNamespace(sweep_box_world=sweep_box_world, nearest_hit=nearest_hit)
+    @wp.func
+    def nearest_hit_bvh(a: vec3, d: vec3, r: scalar, bvh_id: wp.uint64,
+                        box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
+                        box_half_extents: wp.array(dtype=vec3), box_radius: wp.array(dtype=scalar),
+                        box_extent: wp.array(dtype=vec3)):
+        """:func:`nearest_hit` over the boxes a BVH query returns.
+
+        ``bvh_id`` is a :class:`warp.Bvh` over the boxes' reject bounds (``center +- extent (1 +
+        REJECT_SLACK)``, float32, rounded outward and padded; built by the host). The query box
+        is the segment's world bounding box grown by ``r (1 + REJECT_SLACK)`` and padded the
+        same way, in float32 rounded outward, so every box the per-box reject would let through
+        is a candidate: the result is bit-identical to :func:`nearest_hit`. Candidates come in
+        any order, hence the explicit tie rule. ``bvh_id = 0`` (no boxes) hits nothing.
+
+        Returns:
+            ``(box, t, normal)``: ``box`` is -1 when nothing is hit (then ``t = 1``, normal 0).
+        """
+        best = int(-1)
+        best_t = ONE
+        best_n = vec3(ZERO, ZERO, ZERO)
+        if bvh_id != wp.uint64(0):
+            b = a + d
+            grow = r * SLACK
+            lower = wp.vec3f()
+            upper = wp.vec3f()
+            for i in range(3):
+                lo = wp.min(a[i], b[i]) - grow
+                hi = wp.max(a[i], b[i]) + grow
+                pad = PAD_REL * wp.max(wp.abs(lo), wp.abs(hi)) + PAD_ABS
+                lower[i] = wp.float32(lo - pad)
+                upper[i] = wp.float32(hi + pad)
+            query = wp.bvh_query_aabb(bvh_id, lower, upper)
+            k = int(0)
+            while wp.bvh_query_next(query, k):
+                hit, t, normal = sweep_box_world(a, d, r, box_center[k], box_rotation[k],
+                                                 box_half_extents[k], box_radius[k],
+                                                 box_extent[k])
+                if hit == 1 and (best < 0 or t < best_t or (t == best_t and k < best)):
+                    best = k
+                    best_t = t
+                    best_n = normal
+        return best, best_t, best_n
+
+    return SimpleNamespace(sweep_box_world=sweep_box_world, nearest_hit=nearest_hit,
+                           nearest_hit_bvh=nearest_hit_bvh)
+
+
+@cache
+def model_nearest_hit(p: Precision, broad_phase: bool):
+    """The nearest-hit ``@wp.func`` the kernels call, with the kernels' ``# Model`` arguments.
+
+    Args:
+        p: precision.
+        broad_phase: compile the BVH query (:func:`nearest_hit_bvh`, ``box_bvh`` read) instead
+            of the loop over all boxes (:func:`nearest_hit`, ``box_bvh`` unused).
+
+    Returns:
+        ``nearest_hit_model(a, d, r, box_center, box_rotation, box_half_extents, box_radius,
+        box_extent, box_bvh) -> (box, t, normal)``, the contract of :func:`nearest_hit`.
+    """
+    scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
+    funcs = nearest_funcs(p)
+    nearest_hit, nearest_hit_bvh = funcs.nearest_hit, funcs.nearest_hit_bvh
+
+    @wp.func
+    def nearest_hit_model(a: vec3, d: vec3, r: scalar,
+                          box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
+                          box_half_extents: wp.array(dtype=vec3),
+                          box_radius: wp.array(dtype=scalar), box_extent: wp.array(dtype=vec3),
+                          box_bvh: wp.uint64):
+        """First contact of the sphere over the boxes, by the broad phase compiled in."""
+        if wp.static(broad_phase):
+            box, t, normal = nearest_hit_bvh(a, d, r, box_bvh, box_center, box_rotation,
+                                             box_half_extents, box_radius, box_extent)
+        else:
+            box, t, normal = nearest_hit(a, d, r, box_center, box_rotation, box_half_extents,
+                                         box_radius, box_extent)
+        return box, t, normal
+
+    return nearest_hit_model

@@ -5,8 +5,10 @@ Run ``python -m warpsim.benchmark [--quick] [--device cpu|cuda:0] [--out PATH.js
 
 - ``sweep``: sphere-box sweep throughput of the Warp kernel, of :func:`warpsim.collide_boxes`
   (uploads included) and of the vectorised NumPy implementation on the same inputs, and whether
-  they agree.
-- ``simulator``: sphere-frames per second in the standard room, per kernel feature variant.
+  they agree (brute force over the boxes); then brute force against the BVH broad phase for
+  many boxes.
+- ``simulator``: sphere-frames per second in the standard room, per kernel feature variant;
+  then brute force against the BVH broad phase on the bundled ``galton`` scene.
 - ``accuracy``: float32 against float64 sweeps (at the origin and 1e4 m away), simulator error
   against step size, and energy drift over a long run.
 
@@ -32,7 +34,7 @@ import numpy as np
 import warp as wp
 
 from .collide import collide_boxes
-from .device import DeviceBoxes, precision, resolve_device, to_device
+from .device import BVH_MIN_BOXES, DeviceBoxes, precision, resolve_device, to_device, use_bvh
 from .kernels.collide_kernels import collide_kernel
 from .kernels.frame_kernel import frame_kernel
 from .numpy_sweep import sweep_boxes_numpy
@@ -78,6 +80,11 @@ PLATE_ROUNDING = 0.02
 ROOM_SEED = 7
 SPHERE_RADIUS = 0.05
 """[m]"""
+GALTON_SEED = 1
+"""Emitter seed of the galton scene's swarms."""
+GALTON_WARMUP_FRAMES = 60
+"""Frames (0.5 s) run before the galton timings: the balls start together above the funnel
+and meet the first obstacle after about 20 frames; by 60 they are among the pegs."""
 ROOM_SPEEDS = (5.0, 60.0)
 """[m/s]"""
 BASE_MAX_BOUNCES = 8
@@ -94,11 +101,13 @@ VARIANTS = {  # name -> (Scene keyword arguments, Simulator keyword arguments)
 
 FULL = {  # sizes, timing target [s] per call, repeats, and the accuracy runs' sizes
     "sweep_n": (10_000, 100_000, 1_000_000), "sweep_k": (1, 16, 64),
+    "broad_n": 100_000, "broad_k": (64, 256, 1024), "galton_n": (10_000, 100_000),
     "sim_n": (1_000, 10_000, 100_000, 1_000_000), "target_s": 0.5, "repeats": 5,
     "max_frames": 2000, "acc_sweep_n": 100_000, "acc_sweep_k": 16, "acc_sim_n": 10_000,
     "long_n": 1_000, "long_frames": 10_000}
 QUICK = {
     "sweep_n": (1_000, 10_000), "sweep_k": (1, 16), "sim_n": (1_000, 10_000),
+    "broad_n": 10_000, "broad_k": (64, 256, 1024), "galton_n": (10_000, 100_000),
     "target_s": 0.2, "repeats": 3, "max_frames": 1000, "acc_sweep_n": 10_000, "acc_sweep_k": 16,
     "acc_sim_n": 10_000, "long_n": 1_000, "long_frames": 1_000}
 STEP_SIZES = (1 / 30, 1 / 60, 1 / 120, 1 / 240)
@@ -301,8 +310,12 @@ def energy_above_floor(sim: Simulator, energy: np.ndarray) -> np.ndarray:
 
 # -- 1. sweep ---------------------------------------------------------------------------------
 
-def device_sweep(boxes, position, velocity, radius, dt, precision_name, device):
+def device_sweep(boxes, position, velocity, radius, dt, precision_name, device,
+                 bvh: bool = False):
     """Device arrays for one sweep batch, uploaded once, and the collide kernel launch over them.
+
+    Args:
+        bvh: the BVH broad phase (else brute force over the boxes).
 
     Returns:
         ``(launch, read)``: ``launch()`` runs the kernel; ``read()`` returns the numpy
@@ -310,16 +323,19 @@ def device_sweep(boxes, position, velocity, radius, dt, precision_name, device):
     """
     p = precision(precision_name)
     n = len(position)
-    kernel = collide_kernel(p.name)
-    inputs = DeviceBoxes.upload(boxes, p, device).inputs() + [
+    kernel = collide_kernel(p.name, bvh)
+    model = DeviceBoxes.upload(boxes, p, device, bvh=bvh)
+    inputs = model.inputs() + [
         p.scalar(dt), to_device(position, p.vec3, p, device),
         to_device(velocity, p.vec3, p, device), to_device(radius, p.scalar, p, device)]
     box = wp.empty(n, dtype=wp.int32, device=device)
     outs = [wp.empty(n, dtype=p.scalar, device=device)] + [
         wp.empty(n, dtype=p.vec3, device=device) for _ in range(4)]
 
+    held = (model, inputs)  # the inputs carry the BVH's id: its owner must live as long
+
     def launch() -> None:
-        wp.launch(kernel, dim=n, inputs=inputs, outputs=[box] + outs, device=device)
+        wp.launch(kernel, dim=n, inputs=held[1], outputs=[box] + outs, device=device)
 
     def read() -> dict:
         return {"box": box.numpy(), "t": outs[0].numpy(), "normal": outs[2].numpy()}
@@ -328,11 +344,13 @@ def device_sweep(boxes, position, velocity, radius, dt, precision_name, device):
 
 
 def sweep_row(n: int, k: int, cfg: dict, device) -> dict:
-    """One sweep size: timings of the three implementations on the same inputs, agreement."""
+    """One sweep size: timings of the three implementations on the same inputs, agreement
+    (brute force over the boxes: the BVH has its own table)."""
     boxes, pos, vel, rad = sweep_inputs(n, k)
     launch, read = device_sweep(boxes, pos, vel, rad, DT, "float32", device)
     times = median_times(
-        {"warp": launch, "api": lambda: collide_boxes(pos, vel, rad, boxes, DT, device=device)},
+        {"warp": launch, "api": lambda: collide_boxes(pos, vel, rad, boxes, DT, device=device,
+                                                      broad_phase="brute")},
         device, cfg["repeats"])
     (warp_s, warp_reps), (api_s, _) = times["warp"], times["api"]
     ours = read()
@@ -354,11 +372,30 @@ def sweep_row(n: int, k: int, cfg: dict, device) -> dict:
             "max_abs_dt": float(dt_err.max(initial=0.0))}
 
 
+def broad_phase_row(n: int, k: int, cfg: dict, device) -> dict:
+    """One sweep size, brute force against the BVH broad phase: kernel times, and whether the
+    two give the same results bit for bit."""
+    boxes, pos, vel, rad = sweep_inputs(n, k)
+    runs = {bp: device_sweep(boxes, pos, vel, rad, DT, "float32", device, bvh=bp == "bvh")
+            for bp in ("brute", "bvh")}
+    times = median_times({bp: launch for bp, (launch, _) in runs.items()}, device,
+                         cfg["repeats"])
+    res = {bp: read() for bp, (_, read) in runs.items()}
+    same = all(np.array_equal(res["brute"][f], res["bvh"][f]) for f in res["brute"])
+    (brute_s, reps), (bvh_s, _) = times["brute"], times["bvh"]
+    return {"n": n, "k": k, "hit_fraction": float(np.mean(res["bvh"]["box"] >= 0)),
+            "repeats": reps, "brute_s": brute_s, "bvh_s": bvh_s,
+            "brute_ns_per_sphere": brute_s / n * 1e9, "bvh_ns_per_sphere": bvh_s / n * 1e9,
+            "bvh_speedup": brute_s / bvh_s, "identical": same}
+
+
 def bench_sweep(cfg: dict, device) -> dict:
-    """Sweep throughput: Warp kernel alone, ``collide_boxes`` end to end, NumPy; agreement."""
-    compile_s = build_kernel(collide_kernel("float32"), device)
+    """Sweep throughput: Warp kernel alone, ``collide_boxes`` end to end, NumPy; agreement.
+    Then brute force against the BVH broad phase for many boxes."""
+    compile_s = build_kernel(collide_kernel("float32", False), device)
+    compile_bvh = build_kernel(collide_kernel("float32", True), device)
     rows = [sweep_row(n, k, cfg, device) for k in cfg["sweep_k"] for n in cfg["sweep_n"]]
-    print_table("Sweep throughput, float32 (one frame, dt = 1/60 s)", rows, [
+    print_table("Sweep throughput, float32 (one frame, dt = 1/60 s), brute force", rows, [
         ("N", "n", ",d"), ("K", "k", "d"), ("hit", "hit_fraction", ".1%"),
         ("Warp pairs/s", "warp_pairs_per_s", ".3g"), ("Warp ns/sph", "warp_ns_per_sphere", ".3g"),
         ("API ns/sph", "api_ns_per_sphere", ".3g"),
@@ -366,9 +403,18 @@ def bench_sweep(cfg: dict, device) -> dict:
         ("NumPy ns/sph", "numpy_ns_per_sphere", ".3g"),
         ("NumPy/Warp", "numpy_over_warp", ".1f"), ("agree", "agree_fraction", ".4%"),
         ("max|dt|", "max_abs_dt", ".2g")])
-    print(f"collide kernel float32 build: {compile_s['seconds']:.2f} s"
-          f"{' (loaded from the kernel cache)' if compile_s['cached'] else ''}")
-    return {"compile": {"collide float32": compile_s}, "rows": rows}
+    broad = [broad_phase_row(cfg["broad_n"], k, cfg, device) for k in cfg["broad_k"]]
+    print_table(f"Sweep broad phase, float32: brute force against BVH (N = {cfg['broad_n']:,}; "
+                f"'auto' takes the BVH from K = {BVH_MIN_BOXES})", broad, [
+                    ("N", "n", ",d"), ("K", "k", "d"), ("hit", "hit_fraction", ".1%"),
+                    ("brute ns/sph", "brute_ns_per_sphere", ".3g"),
+                    ("BVH ns/sph", "bvh_ns_per_sphere", ".3g"),
+                    ("brute/BVH", "bvh_speedup", ".2f"), ("identical", "identical", "")])
+    for name, c in (("float32", compile_s), ("float32 BVH", compile_bvh)):
+        print(f"collide kernel {name} build: {c['seconds']:.2f} s"
+              f"{' (loaded from the kernel cache)' if c['cached'] else ''}")
+    return {"compile": {"collide float32": compile_s, "collide float32 bvh": compile_bvh},
+            "rows": rows, "broad_phase": broad}
 
 
 # -- 2. simulator -----------------------------------------------------------------------------
@@ -380,7 +426,7 @@ def variant_setup(name: str, boxes: RoundedBoxes):
     prec = sim_kw.get("precision", "float32")
     bounces = sim_kw.get("max_bounces", BASE_MAX_BOUNCES)
     kernel = frame_kernel(prec, bounces, scene.friction > 0.0, scene.energy_correction,
-                          scene.energy_retention < 1.0)
+                          scene.energy_retention < 1.0, use_bvh("auto", len(boxes)))
     return scene, {"precision": prec, "max_bounces": bounces}, kernel
 
 
@@ -430,10 +476,58 @@ def bench_simulator(cfg: dict, device) -> dict:
                     ("ns/sph-frame", "ns_per_sphere_frame", ".3g"),
                     ("bounces/sph-frame", "bounces_per_sphere_frame", ".3f"),
                     ("capped", "capped", "d"), ("cost/base", "cost_vs_base", ".2f")])
+    galton = galton_broad_phase(cfg, device)
+    compile_rows += galton.pop("compile")
     print_table("Frame kernel build per variant (or load, when in Warp's kernel cache)",
                 compile_rows, [("variant", "variant", ""), ("seconds", "seconds", ".2f"),
                                ("cached", "cached", "")])
-    return {"boxes": len(boxes), "compile": compile_rows, "rows": rows}
+    return {"boxes": len(boxes), "compile": compile_rows, "rows": rows, "galton": galton}
+
+
+def galton_broad_phase(cfg: dict, device) -> dict:
+    """The bundled ``galton`` scene (its own dt, settings and emitter), brute force against the
+    BVH broad phase: both simulators run ``GALTON_WARMUP_FRAMES`` untimed, then take turns over
+    the same frames from the same swarm, so they do the same work; their states must stay
+    bit-identical."""
+    scene = Scene.load("galton")
+    flags = (scene.max_bounces, scene.friction > 0.0, scene.energy_correction,
+             scene.energy_retention < 1.0)
+    compile_rows = [{"variant": f"galton {bp}",
+                     **build_kernel(frame_kernel("float32", *flags, bp == "bvh"), device)}
+                    for bp in ("brute", "bvh")]
+    rows = []
+    for n in cfg["galton_n"]:
+        swarm = scene.spawn(n=n, seed=GALTON_SEED)
+        sims = {bp: Simulator(scene, swarm, device=device, broad_phase=bp)
+                for bp in ("brute", "bvh")}
+        for sim in sims.values():
+            sim.step(GALTON_WARMUP_FRAMES)
+        frames = frames_per_call(sims["brute"], cfg)
+        sims["bvh"].step(1)
+        times = median_times({bp: partial(sim.step, frames) for bp, sim in sims.items()},
+                             device, cfg["repeats"])
+        a, b = sims["brute"].state(), sims["bvh"].state()
+        same = all(np.array_equal(getattr(a, f), getattr(b, f))
+                   for f in ("position", "velocity", "energy"))
+        (brute_s, reps), (bvh_s, _) = times["brute"], times["bvh"]
+        stats = sims["bvh"].stats
+        rows.append({"scene": "galton", "n": n, "frames": frames, "repeats": reps,
+                     "sim_frames": stats.frames, "brute_s": brute_s, "bvh_s": bvh_s,
+                     "brute_ns_per_sphere_frame": brute_s / (frames * n) * 1e9,
+                     "bvh_ns_per_sphere_frame": bvh_s / (frames * n) * 1e9,
+                     "bvh_speedup": brute_s / bvh_s,
+                     "bounces_per_sphere_frame": stats.bounces / stats.sphere_frames,
+                     "identical": same})
+        del sims
+    print_table(f"Simulator broad phase, galton scene ({len(scene.boxes)} boxes, "
+                f"dt = {scene.dt:.4g} s): brute force against BVH", rows, [
+                    ("N", "n", ",d"), ("frames", "frames", "d"),
+                    ("brute ns/sph-frame", "brute_ns_per_sphere_frame", ".3g"),
+                    ("BVH ns/sph-frame", "bvh_ns_per_sphere_frame", ".3g"),
+                    ("brute/BVH", "bvh_speedup", ".2f"),
+                    ("bounces/sph-frame", "bounces_per_sphere_frame", ".3f"),
+                    ("identical", "identical", "")])
+    return {"boxes": len(scene.boxes), "compile": compile_rows, "rows": rows}
 
 
 # -- 3. accuracy ------------------------------------------------------------------------------
@@ -443,7 +537,7 @@ def sweep_accuracy(cfg: dict, device) -> dict:
     away; float32 and float64 throughput side by side."""
     n, k = cfg["acc_sweep_n"], cfg["acc_sweep_k"]
     boxes, pos, vel, rad = sweep_inputs(n, k, seed=SEED + 1)
-    compile_s = {p: build_kernel(collide_kernel(p), device) for p in ("float32", "float64")}
+    compile_s = {p: build_kernel(collide_kernel(p, False), device) for p in ("float32", "float64")}
     rows = []
     for offset in (0.0, FAR_OFFSET):
         moved = RoundedBoxes(boxes.center + offset, boxes.half_extents, boxes.rotation,
@@ -503,7 +597,8 @@ def step_size_error(cfg: dict, device) -> list[dict]:
     for correction in (True, False):
         scene = Scene(boxes, energy_correction=correction)
         for prec in ("float32", "float64"):
-            build_kernel(frame_kernel(prec, BASE_MAX_BOUNCES, False, correction, False), device)
+            build_kernel(frame_kernel(prec, BASE_MAX_BOUNCES, False, correction, False,
+                                      use_bvh("auto", len(boxes))), device)
             for dt in STEP_SIZES:
                 sim = Simulator(scene, swarm, dt=dt, max_bounces=BASE_MAX_BOUNCES,
                                 device=device, precision=prec)

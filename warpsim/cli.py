@@ -47,6 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--max-bounces", type=int, help="contacts per sphere per frame")
     run.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's)")
     run.add_argument("--precision", default="float32", choices=("float32", "float64"))
+    run.add_argument("--broad-phase", default="auto", choices=("auto", "bvh", "brute"),
+                     help="candidate boxes per sphere: a BVH or all boxes (same results)")
     run.add_argument("-o", "--output", help="output .usdc or .usda (default: SCENE.usdc)")
     run.add_argument("--every", type=int, default=1, help="record one frame in EVERY")
     run.add_argument("--max-bytes", type=float, default=2e9,
@@ -108,7 +110,8 @@ def _cmd_run(args) -> int:
     if not out.parent.is_dir():
         raise ValueError(f"output directory {str(out.parent)!r} does not exist")
     sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
-                       device=args.device, precision=args.precision)
+                       device=args.device, precision=args.precision,
+                       broad_phase=args.broad_phase)
     from . import export
 
     estimate = export.estimate_usd_bytes(len(swarm), frames // args.every + 1, out.suffix[1:])

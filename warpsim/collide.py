@@ -8,7 +8,7 @@ import numpy as np
 import warp as wp
 
 from . import validation as check
-from .device import DeviceBoxes, precision, resolve_device, to_device
+from .device import DeviceBoxes, precision, resolve_device, to_device, use_bvh
 from .kernels.collide_kernels import bounce_kernel, collide_kernel
 from .obstacles import RoundedBox, RoundedBoxes
 
@@ -43,7 +43,7 @@ class Contacts:
 
 
 def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: float, *,
-                  device=None, precision: str = "float32") -> Contacts:
+                  device=None, precision: str = "float32", broad_phase: str = "auto") -> Contacts:
     """First contact of each moving sphere with a group of static rounded boxes.
 
     Every sphere moves in a straight line for ``dt``; the first contact over all boxes is kept
@@ -58,6 +58,10 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
         dt: frame duration [s], > 0.
         device: Warp device (``"cpu"``, ``"cuda:0"``; None for Warp's default).
         precision: ``"float32"`` or ``"float64"`` kernels.
+        broad_phase: how each sphere finds its candidate boxes: ``"brute"`` tries every box,
+            ``"bvh"`` queries a BVH over the boxes' bounds (built per call), ``"auto"`` takes
+            the BVH from ``warpsim.device.BVH_MIN_BOXES`` boxes on. The results are
+            bit-identical; only the speed differs.
 
     Returns:
         :class:`Contacts`, arrays of the chosen precision.
@@ -65,23 +69,18 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
     Raises:
         ValueError: a bad input, naming the field and the index.
     """
-    if isinstance(boxes, RoundedBox):
-        boxes = boxes.as_boxes()
-    if not isinstance(boxes, RoundedBoxes):
-        raise ValueError(f"boxes must be a RoundedBoxes or RoundedBox, got {type(boxes).__name__}")
-    pos = check.vec3_array("position", position)
+    boxes, pos, vel, rad = check.sphere_batch(position, velocity, radius, boxes)
     n = pos.shape[0]
-    vel = check.vec3_array("velocity", velocity, n)
-    rad = check.per_item("radius", radius, n, minimum=0.0)
     dt = check.scalar("dt", dt, positive=True)
     p = precision_of(precision)
+    bvh = use_bvh(broad_phase, len(boxes))
     dev = resolve_device(device)
 
-    model = DeviceBoxes.upload(boxes, p, dev)
+    model = DeviceBoxes.upload(boxes, p, dev, bvh=bvh)
     out_box = wp.empty(n, dtype=wp.int32, device=dev)
     outs = [wp.empty(n, dtype=p.scalar, device=dev)] + [
         wp.empty(n, dtype=p.vec3, device=dev) for _ in range(4)]
-    wp.launch(collide_kernel(p.name), dim=n, device=dev,
+    wp.launch(collide_kernel(p.name, bvh), dim=n, device=dev,
               inputs=model.inputs() + [p.scalar(dt),
                                        to_device(pos, p.vec3, p, dev),
                                        to_device(vel, p.vec3, p, dev),
@@ -97,12 +96,13 @@ def collide_box(position, velocity, radius, box: RoundedBox, dt: float, *, devic
                 precision: str = "float32") -> Contacts:
     """First contact of each moving sphere with one static rounded box (sheet method 1).
 
-    The same contract as :func:`collide_boxes` with a group of one (``box`` is 0 or -1).
+    The same contract as :func:`collide_boxes` with a group of one (``box`` is 0 or -1); one
+    box needs no broad phase.
     """
     if not isinstance(box, RoundedBox):
         raise ValueError(f"box must be a warpsim.RoundedBox, got {type(box).__name__}")
     return collide_boxes(position, velocity, radius, box.as_boxes(), dt, device=device,
-                         precision=precision)
+                         precision=precision, broad_phase="brute")
 
 
 def precision_of(name: str):
@@ -133,7 +133,7 @@ class Bounces:
 def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: float, *,
            max_bounces: int = 8, mass=1.0, angular_momentum=None, friction: float = 0.0,
            max_angular_speed: float = 50.0, energy_retention: float = 1.0, device=None,
-           precision: str = "float32") -> Bounces:
+           precision: str = "float32", broad_phase: str = "auto") -> Bounces:
     """Move each sphere in a straight line for ``dt``, bouncing off the boxes (sheet method 3).
 
     At each contact the velocity is reflected and the sphere goes on with the rest of its path,
@@ -154,18 +154,14 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
         max_angular_speed: clamp on ``|L| / I`` [rad/s], > 0.
         energy_retention: kept fraction of kinetic energy per contact, in (0, 1].
         device: Warp device. precision: ``"float32"`` or ``"float64"``.
+        broad_phase: ``"auto"``, ``"bvh"`` or ``"brute"``, as in :func:`collide_boxes`
+            (bit-identical results).
 
     Raises:
         ValueError: a bad input, naming the field and the index.
     """
-    if isinstance(boxes, RoundedBox):
-        boxes = boxes.as_boxes()
-    if not isinstance(boxes, RoundedBoxes):
-        raise ValueError(f"boxes must be a RoundedBoxes or RoundedBox, got {type(boxes).__name__}")
-    pos = check.vec3_array("position", position)
+    boxes, pos, vel, rad = check.sphere_batch(position, velocity, radius, boxes)
     n = pos.shape[0]
-    vel = check.vec3_array("velocity", velocity, n)
-    rad = check.per_item("radius", radius, n, minimum=0.0)
     mas = check.per_item("mass", mass, n, positive=True)
     mom = (np.zeros((n, 3)) if angular_momentum is None
            else check.vec3_array("angular_momentum", angular_momentum, n))
@@ -175,10 +171,11 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
     max_rot = check.scalar("max_angular_speed", max_angular_speed, positive=True)
     retention = check.scalar("energy_retention", energy_retention, positive=True, maximum=1.0)
     p = precision_of(precision)
+    bvh = use_bvh(broad_phase, len(boxes))
     dev = resolve_device(device)
 
-    kernel = bounce_kernel(p.name, max_bounces, friction > 0.0, retention < 1.0)
-    model = DeviceBoxes.upload(boxes, p, dev)
+    kernel = bounce_kernel(p.name, max_bounces, friction > 0.0, retention < 1.0, bvh)
+    model = DeviceBoxes.upload(boxes, p, dev, bvh=bvh)
     bounces = wp.empty(n, dtype=wp.int32, device=dev)
     capped = wp.empty(n, dtype=wp.int32, device=dev)
     outs = [wp.empty(n, dtype=p.vec3, device=dev) for _ in range(3)]

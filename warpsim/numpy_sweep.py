@@ -263,17 +263,13 @@ def sweep_boxes_numpy(position, velocity, radius, boxes: RoundedBoxes | RoundedB
     Raises:
         ValueError: a bad input, naming the field and the index.
     """
-    if isinstance(boxes, RoundedBox):
-        boxes = boxes.as_boxes()
-    if not isinstance(boxes, RoundedBoxes):
-        raise ValueError(f"boxes must be a RoundedBoxes or RoundedBox, got {type(boxes).__name__}")
+    boxes, pos, vel, rad = check.sphere_batch(position, velocity, radius, boxes)
     dtype = np.dtype(dtype)
     if dtype not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise ValueError(f"dtype must be float32 or float64, got {dtype}")
-    pos = check.vec3_array("position", position)
     n = pos.shape[0]
-    vel = check.vec3_array("velocity", velocity, n).astype(dtype)
-    rad = check.per_item("radius", radius, n, minimum=0.0).astype(dtype)
+    vel = vel.astype(dtype)
+    rad = rad.astype(dtype)
     step = dtype.type(check.scalar("dt", dt, positive=True))
     eps = dtype.type(np.finfo(dtype).eps)
 

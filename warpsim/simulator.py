@@ -10,7 +10,7 @@ import numpy as np
 import warp as wp
 
 from . import validation as check
-from .device import DeviceBoxes, precision, resolve_device, to_device
+from .device import DeviceBoxes, precision, resolve_device, to_device, use_bvh
 from .kernels.frame_kernel import frame_kernel
 from .scene import Scene
 from .swarm import Swarm
@@ -83,13 +83,21 @@ class Simulator:
         max_bounces: contacts per sphere per frame, >= 1 (default: ``scene.max_bounces``).
         device: Warp device (None: Warp's default).
         precision: ``"float32"`` or ``"float64"`` kernels.
+        broad_phase: how each sphere finds its candidate boxes: ``"brute"`` tries every box,
+            ``"bvh"`` queries a BVH over the boxes' bounds (built once, here), ``"auto"`` takes
+            the BVH from ``warpsim.device.BVH_MIN_BOXES`` boxes on. Bit-identical results;
+            :attr:`broad_phase` says which one runs.
+
+    Attributes:
+        broad_phase: ``"bvh"`` or ``"brute"``, the broad phase compiled into the kernel.
 
     Raises:
         ValueError: a bad argument, naming it.
     """
 
     def __init__(self, scene: Scene, swarm: Swarm, dt: float | None = None,
-                 max_bounces: int | None = None, device=None, precision: str = "float32"):
+                 max_bounces: int | None = None, device=None, precision: str = "float32",
+                 broad_phase: str = "auto"):
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be a warpsim.Scene, got {type(scene).__name__}")
         if not isinstance(swarm, Swarm):
@@ -99,6 +107,7 @@ class Simulator:
         self.max_bounces = check.positive_int(
             "max_bounces", scene.max_bounces if max_bounces is None else max_bounces)
         self.precision = check.precision(precision)
+        self.broad_phase = "bvh" if use_bvh(broad_phase, len(scene.boxes)) else "brute"
         self.device = resolve_device(device)
         self.spin = bool(scene.friction > 0.0 or np.any(swarm.angular_momentum != 0.0))
         self.energy_origin = _energy_origin(scene, swarm)
@@ -109,7 +118,8 @@ class Simulator:
         """Sphere masses [kg], (N,), float64."""
         self._seconds = 0.0
         self._kernel = frame_kernel(self.precision, self.max_bounces, self.spin,
-                                    scene.energy_correction, scene.energy_retention < 1.0)
+                                    scene.energy_correction, scene.energy_retention < 1.0,
+                                    self.broad_phase == "bvh")
         self._upload(swarm)
 
     # -- set-up -------------------------------------------------------------------------------
@@ -123,7 +133,8 @@ class Simulator:
         energy = self._energy_of(swarm.position.astype(p.np_dtype).astype(np.float64),
                                  swarm.velocity.astype(p.np_dtype).astype(np.float64))
         self._p = p
-        self._boxes = DeviceBoxes.upload(self.scene.boxes, p, dev)
+        self._boxes = DeviceBoxes.upload(self.scene.boxes, p, dev,
+                                         bvh=self.broad_phase == "bvh")
         self._radius = to_device(swarm.radius, p.scalar, p, dev)
         self._mass = to_device(swarm.mass, p.scalar, p, dev)
 

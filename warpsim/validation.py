@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 PRECISIONS = ("float32", "float64")
+BROAD_PHASES = ("auto", "bvh", "brute")
 
 
 def _as_float_array(name: str, value) -> np.ndarray:
@@ -175,6 +176,13 @@ def precision(value: str) -> str:
     return value
 
 
+def broad_phase(value: str) -> str:
+    """``"auto"``, ``"bvh"`` or ``"brute"``."""
+    if not isinstance(value, str) or value not in BROAD_PHASES:
+        raise ValueError(f"broad_phase must be one of {BROAD_PHASES}, got {value!r}")
+    return value
+
+
 def positive_int(name: str, value, *, minimum: int = 1) -> int:
     """An integer >= ``minimum`` (bools refused)."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
@@ -200,3 +208,26 @@ def frozen(arr: np.ndarray) -> np.ndarray:
     """Mark an owned array read-only, so validated data cannot drift after the check."""
     arr.setflags(write=False)
     return arr
+
+
+def sphere_batch(position, velocity, radius, boxes):
+    """The common inputs of the batched queries, checked: ``(boxes, position, velocity, radius)``.
+
+    Args:
+        position: (N, 3) centres [m]. velocity: (N, 3) [m/s]. radius: scalar or (N,) [m], >= 0.
+        boxes: a :class:`warpsim.RoundedBoxes`, or one :class:`warpsim.RoundedBox`.
+
+    Returns:
+        The boxes as a group, and float64 copies of position (N, 3), velocity (N, 3), radius (N,).
+    """
+    from .obstacles import RoundedBox, RoundedBoxes
+
+    if isinstance(boxes, RoundedBox):
+        boxes = boxes.as_boxes()
+    if not isinstance(boxes, RoundedBoxes):
+        raise ValueError(f"boxes must be a RoundedBoxes or RoundedBox, got {type(boxes).__name__}")
+    pos = vec3_array("position", position)
+    n = pos.shape[0]
+    return (boxes, pos, vec3_array("velocity", velocity, n),
+            per_item("radius", radius, n, minimum=0.0))
+

@@ -1,0 +1,177 @@
+"""The BVH broad phase against brute force: bit-identical results, the same tie rule.
+
+Both broad phases feed the same per-box step (``sweep_box_world``) and keep the smallest ``t``
+with ties to the lower box index, and the BVH's bounds contain the per-box reject's, so every
+output must be equal bit for bit, not merely close. The scenes are built to stress that:
+overlapping and abutting rotated rounded boxes, zero-extent plates, exact duplicates (equal
+``t`` on two boxes: the lower index must win in both), spheres starting inside boxes, and the
+same scene 1e4 m from the origin (float32 bounds a few ulps from the reject's).
+
+Kernel variants compiled here (most are shared with other tests): the collide kernel for
+float32 and float64, brute and BVH; the default bounce kernel, brute and BVH; the galton
+scene's frame kernel (float32, lossy), brute and BVH, also used for the K = 0 checks.
+"""
+
+import numpy as np
+import pytest
+
+import warpsim as ws
+from warpsim.device import BVH_MIN_BOXES, bvh_bounds
+from warpsim.kernels.nearest import REJECT_SLACK
+
+DT = 1.0 / 60.0
+CONTACT_FIELDS = ("hit", "t", "position", "normal", "new_position", "new_velocity", "box")
+STATE_FIELDS = ("position", "velocity", "energy", "angular_momentum", "orientation")
+
+
+def random_rotations(rng: np.random.Generator, k: int) -> np.ndarray:
+    q = rng.normal(size=(k, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def crowded_scene(k: int, rng: np.random.Generator, offset: float = 0.0):
+    """``k`` boxes packed so they overlap and abut: rotated rounded boxes, zero-thickness
+    plates (sharp and rounded), a row of axis-aligned boxes sharing faces, and exact
+    duplicates of earlier boxes at the end.
+
+    Returns:
+        ``(boxes, region half size [m], indices of the duplicates, their originals)``.
+    """
+    n_dup = k // 10
+    n_row = k // 10
+    n_free = k - n_dup - n_row
+    half_region = 0.5 * (0.5 * k) ** (1 / 3)  # one box per 0.5 m^3: they overlap
+    center = rng.uniform(-half_region, half_region, size=(n_free, 3))
+    half = rng.uniform(0.05, 0.5, size=(n_free, 3))
+    kind = np.arange(n_free) % 4
+    half[kind == 2, 1] = 0.0  # sharp plates
+    half[kind == 3] *= np.array([1.0, 0.0, 0.0])  # rounded sticks
+    radius = np.where(kind == 0, 0.0, np.where(kind == 1, rng.uniform(0.01, 0.2, n_free),
+                                               np.where(kind == 2, 0.0, 0.05)))
+    rotation = random_rotations(rng, n_free)
+    # abutting: face to face along x, 0.4 m cubes from the region's corner
+    row_center = np.column_stack([-half_region + 0.2 + 0.4 * np.arange(n_row),
+                                  np.zeros(n_row), np.zeros(n_row)])
+    row_half = np.full((n_row, 3), 0.2)
+    base = ws.RoundedBoxes.concatenate([
+        ws.RoundedBoxes(center, half, rotation, radius),
+        ws.RoundedBoxes(row_center, row_half)])
+    original = rng.choice(len(base), size=n_dup, replace=False)
+    dup = ws.RoundedBoxes(base.center[original], base.half_extents[original],
+                          base.rotation[original], base.radius[original])
+    boxes = ws.RoundedBoxes.concatenate([base, dup])
+    moved = ws.RoundedBoxes(boxes.center + offset, boxes.half_extents, boxes.rotation,
+                            boxes.radius)
+    return moved, half_region, len(base) + np.arange(n_dup), original
+
+
+def swarm_inputs(n: int, half_region: float, rng: np.random.Generator, offset: float = 0.0):
+    """Spheres anywhere in the region (some start inside boxes), paths up to 1.5 m a frame,
+    radii from 0; the last one is far from every box."""
+    position = rng.uniform(-half_region - 0.5, half_region + 0.5, size=(n, 3))
+    direction = rng.normal(size=(n, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    velocity = direction * rng.uniform(0.5, 90.0, size=(n, 1))
+    radius = rng.uniform(0.0, 0.1, size=n)
+    radius[::7] = 0.0
+    position[-1] = 1e3
+    return position + offset, velocity, radius
+
+
+def assert_same(a, b, fields):
+    for name in fields:
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e4], ids=["origin", "far"])
+@pytest.mark.parametrize("k", [50, 300])
+def test_collide_boxes_bvh_is_bit_identical(k, offset, precision):
+    rng = np.random.default_rng([k, int(offset)])
+    boxes, half_region, dup, original = crowded_scene(k, rng, offset)
+    pos, vel, rad = swarm_inputs(3000, half_region, rng, offset)
+    brute = ws.collide_boxes(pos, vel, rad, boxes, DT, precision=precision, device="cpu",
+                             broad_phase="brute")
+    bvh = ws.collide_boxes(pos, vel, rad, boxes, DT, precision=precision, device="cpu",
+                           broad_phase="bvh")
+    assert_same(brute, bvh, CONTACT_FIELDS)
+    assert 0.1 < brute.hit.mean() < 0.95  # a crowded scene, not a trivial one
+    assert bvh.box[-1] == -1  # the far sphere
+    # ties: a duplicate has the same t as its original, lower index, so it never wins
+    assert not np.isin(bvh.box, dup).any()
+    assert np.isin(bvh.box, original).sum() > 10
+    auto = ws.collide_boxes(pos, vel, rad, boxes, DT, precision=precision, device="cpu")
+    assert_same(brute, auto, CONTACT_FIELDS)
+
+
+def test_bounce_bvh_is_bit_identical():
+    rng = np.random.default_rng(3)
+    boxes, half_region, _, _ = crowded_scene(120, rng)
+    pos, vel, rad = swarm_inputs(2000, half_region, rng)
+    brute = ws.bounce(pos, vel, rad, boxes, DT, device="cpu", broad_phase="brute")
+    bvh = ws.bounce(pos, vel, rad, boxes, DT, device="cpu", broad_phase="bvh")
+    assert_same(brute, bvh, ("hit", "bounces", "capped", "position", "velocity",
+                             "angular_momentum"))
+    assert brute.bounces.max() >= 2
+
+
+def test_simulator_galton_bvh_is_bit_identical():
+    scene = ws.Scene.load("galton")
+    assert len(scene.boxes) >= BVH_MIN_BOXES
+    swarm = scene.spawn(n=1000, seed=1)
+    sims = {bp: ws.Simulator(scene, swarm, device="cpu", broad_phase=bp)
+            for bp in ("brute", "bvh", "auto")}
+    assert {bp: s.broad_phase for bp, s in sims.items()} == {
+        "brute": "brute", "bvh": "bvh", "auto": "bvh"}
+    for sim in sims.values():
+        sim.step(30)
+    brute, bvh = sims["brute"], sims["bvh"]
+    assert_same(brute.state(), bvh.state(), STATE_FIELDS)
+    assert_same(brute.state(), sims["auto"].state(), STATE_FIELDS)
+    assert brute.stats.bounces == bvh.stats.bounces > 0
+    assert brute.stats.capped == bvh.stats.capped
+
+
+def test_auto_keeps_brute_force_for_few_boxes():
+    boxes = ws.RoundedBoxes(np.zeros((BVH_MIN_BOXES - 1, 3)), np.full((BVH_MIN_BOXES - 1, 3), 0.1))
+    swarm = ws.Swarm([[0.0, 1.0, 0.0]], [[0.0, 0.0, 0.0]], 0.05)
+    assert ws.Simulator(ws.Scene(boxes), swarm, device="cpu").broad_phase == "brute"
+
+
+@pytest.mark.parametrize("broad_phase", ["brute", "bvh", "auto"])
+def test_no_boxes(broad_phase):
+    empty = ws.RoundedBoxes(np.zeros((0, 3)), np.zeros((0, 3)))
+    pos = np.array([[0.0, 1.0, 0.0], [2.0, 0.0, -1.0]])
+    vel = np.array([[1.0, 0.0, 0.0], [0.0, -3.0, 0.0]])
+    c = ws.collide_boxes(pos, vel, 0.1, empty, DT, device="cpu", broad_phase=broad_phase)
+    assert (c.box == -1).all() and (c.t == 1.0).all()
+    lossy = ws.Scene(empty, energy_retention=0.5)  # the galton test's kernels: no new builds
+    sim = ws.Simulator(lossy, ws.Swarm(pos, vel, 0.1), device="cpu", broad_phase=broad_phase)
+    sim.step(2)
+    assert np.isfinite(sim.state().position).all()
+
+
+def test_bad_broad_phase_is_refused():
+    box = ws.RoundedBox()
+    swarm = ws.Swarm([[0.0, 2.0, 0.0]], [[0.0, 0.0, 0.0]], 0.05)
+    with pytest.raises(ValueError, match="broad_phase"):
+        ws.collide_boxes([[0.0, 2.0, 0.0]], [[0.0, -1.0, 0.0]], 0.1, box, DT, broad_phase="bhv")
+    with pytest.raises(ValueError, match="broad_phase"):
+        ws.bounce([[0.0, 2.0, 0.0]], [[0.0, -1.0, 0.0]], 0.1, box, DT, broad_phase=None)
+    with pytest.raises(ValueError, match="broad_phase"):
+        ws.Simulator(ws.Scene(box.as_boxes()), swarm, device="cpu", broad_phase="octree")
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e4, 1e-3])
+def test_bvh_bounds_hold_the_reject_bounds(scale):
+    """float32 bounds contain ``center +- extent (1 + REJECT_SLACK)``, exactly (no rounding in)."""
+    rng = np.random.default_rng(5)
+    center = rng.normal(size=(500, 3)) * scale
+    extent = rng.uniform(0.0, 1.0, size=(500, 3)) * scale
+    extent[::5] = 0.0
+    for dtype in (np.float32, np.float64):
+        c, e = center.astype(dtype), extent.astype(dtype)
+        lower, upper = bvh_bounds(c, e)
+        assert lower.dtype == upper.dtype == np.float32
+        reach = e.astype(np.float64) * (1.0 + REJECT_SLACK)
+        assert (lower.astype(np.float64) < c.astype(np.float64) - reach).all()
+        assert (upper.astype(np.float64) > c.astype(np.float64) + reach).all()
