@@ -38,3 +38,39 @@ def tol(precision):
 
 def np_dtype(precision: str):
     return np.float32 if precision == "float32" else np.float64
+
+
+def closed_room(half: float, thickness: float = 0.5, center=(0.0, 0.0, 0.0)):
+    """Six sharp walls whose inner faces are the planes ``center +- half`` on each axis.
+
+    Each wall overhangs the room by ``thickness`` on its four sides, so everywhere a sphere
+    inside can touch it is the middle of a face (no edge, no corner of a wall is reachable).
+    """
+    import warpsim as ws
+
+    centers, halves = [], []
+    for axis in range(3):
+        for side in (-1.0, 1.0):
+            c = np.array(center, dtype=np.float64)
+            c[axis] += side * (half + thickness)
+            h = np.full(3, half + 2.0 * thickness)
+            h[axis] = thickness
+            centers.append(c)
+            halves.append(h)
+    return ws.RoundedBoxes(center=centers, half_extents=halves)
+
+
+def shaped_half_extents(rng, kind: str, low: float, high: float) -> np.ndarray:
+    """Random core half extents in [low, high] for a box ``kind``: "box" (all > 0), "plate"
+    (one zero), "stick" (two zeros), "point" (all zero) or "cube" (all equal)."""
+    h = rng.uniform(low, high, 3)
+    if kind == "plate":
+        h[rng.integers(3)] = 0.0
+    elif kind == "stick":
+        h[rng.choice(3, 2, replace=False)] = 0.0
+    elif kind == "point":
+        h[:] = 0.0
+    elif kind == "cube":
+        h[:] = h[0]
+    return h
+

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import DEVICES
+from conftest import DEVICES, closed_room
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
@@ -42,22 +42,6 @@ VECTOR_ULPS = 16.0
 MAX_BOUNCES = 8  # the default, and the only cap compiled here (each cap is a kernel variant)
 
 
-def room(half: float, thickness: float = 0.5, center=(0.0, 0.0, 0.0)) -> ws.RoundedBoxes:
-    """Six sharp walls whose inner faces are the planes ``center +- half`` on each axis.
-
-    Each wall overhangs the room by ``thickness`` on its four sides, so everywhere a sphere
-    inside can touch it is the middle of a face (no edge, no corner of a wall is reachable).
-    """
-    centers, halves = [], []
-    for axis in range(3):
-        for side in (-1.0, 1.0):
-            c = np.array(center, dtype=np.float64)
-            c[axis] += side * (half + thickness)
-            h = np.full(3, half + 2.0 * thickness)
-            h[axis] = thickness
-            centers.append(c)
-            halves.append(h)
-    return ws.RoundedBoxes(center=centers, half_extents=halves)
 
 
 def unfold(x, a):
@@ -130,12 +114,12 @@ PATH_CASES = [
      0.25, (0.0, 0.0, 0.0), (3.0, 2.5, 0.5), (3.0, -0.5, 0.5), (3.0, 2.5, 0.5), 2),
     # Room [-1, 1]^3: the centre reaches the corner (0.75, 0.75, 0.75) at t = 1/4, touching
     # three walls at once (three contacts, the last two at t = 0), and comes back 0.75 per axis.
-    ("room-corner", room(1.0), 0.25, (0.5, 0.5, 0.5), (1.0, 1.0, 1.0), (0.0, 0.0, 0.0),
+    ("room-corner", closed_room(1.0), 0.25, (0.5, 0.5, 0.5), (1.0, 1.0, 1.0), (0.0, 0.0, 0.0),
      (-1.0, -1.0, -1.0), 3),
     # Room [-1, 1]^3, per axis: x 0.25 + 2.5 = 2.75, contacts at 0.75 and -0.75, 0.5 m left:
     # -0.25; y 0.125 - 1.5 = -1.375, contact at -0.75, 0.625 m left: -0.125; z -0.5 + 0.75
     # = 0.25, no contact.
-    ("room-oblique", room(1.0), 0.25, (0.25, 0.125, -0.5), (2.5, -1.5, 0.75),
+    ("room-oblique", closed_room(1.0), 0.25, (0.25, 0.125, -0.5), (2.5, -1.5, 0.75),
      (-0.25, -0.125, 0.25), (2.5, 1.5, 0.75), 3),
 ]
 
@@ -173,7 +157,7 @@ def test_room_end_position_is_the_unfolded_one(device, precision, start, directi
     assume(folds.sum() <= MAX_BOUNCES)  # the cap is tested on its own below
     # An end within rounding of a wall may or may not count the contact at t = 1.
     assume(np.all(a - np.abs(end) > 1e-6 * (1.0 + speed)))
-    b = bounce_one(x0, v, radius, room(half), 1.0, device=device, precision=precision)
+    b = bounce_one(x0, v, radius, closed_room(half), 1.0, device=device, precision=precision)
     eps = EPS[precision]
     tol = PIECE_ULPS * eps * (half + speed) * (folds.sum() + 1)
     assert not b.capped[0]
@@ -196,7 +180,7 @@ def test_room_batch_far_from_origin_matches_unfolding():
     v *= rng.uniform(0.0, 6.0, (n, 1)) / np.linalg.norm(v, axis=1)[:, None]
     end, sign, folds = unfold(x0 + v, a)
     assert folds.sum(axis=1).max() <= MAX_BOUNCES  # below the cap by construction
-    b = ws.bounce(center + x0, v, r, room(half, center=center), 1.0, precision="float64")
+    b = ws.bounce(center + x0, v, r, closed_room(half, center=center), 1.0, precision="float64")
     tol = PIECE_ULPS * EPS["float64"] * (np.abs(center).max() + 7.0) * (MAX_BOUNCES + 1)
     np.testing.assert_array_equal(b.bounces, folds.sum(axis=1))
     np.testing.assert_allclose(b.position - center, end, rtol=0, atol=tol)

@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import closed_room
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -48,19 +49,6 @@ PIECE_ULPS = 4.0
 MAX_BOUNCES = 8
 
 
-def room(half: float, thickness: float = 0.5, center=(0.0, 0.0, 0.0)) -> ws.RoundedBoxes:
-    """Six sharp walls whose inner faces are the planes ``center +- half`` on each axis; each
-    overhangs the room by ``thickness``, so no wall edge is reachable from inside."""
-    centers, halves = [], []
-    for axis in range(3):
-        for side in (-1.0, 1.0):
-            c = np.array(center, dtype=np.float64)
-            c[axis] += side * (half + thickness)
-            h = np.full(3, half + 2.0 * thickness)
-            h[axis] = thickness
-            centers.append(c)
-            halves.append(h)
-    return ws.RoundedBoxes(center=centers, half_extents=halves)
 
 
 def floor(center=(0.0, 0.0, 0.0), half: float = 50.0) -> ws.RoundedBoxes:
@@ -135,7 +123,7 @@ def random_scene(rng, half, count):
     radius = rng.uniform(0.0, 0.2, count) * (rng.random(count) > 0.3)
     obstacles = ws.RoundedBoxes(center=rng.uniform(-1.0, 1.0, (count, 3)), half_extents=extents,
                                 rotation=random_unit_quaternions(rng, count), radius=radius)
-    return ws.RoundedBoxes.concatenate([room(half), obstacles])
+    return ws.RoundedBoxes.concatenate([closed_room(half), obstacles])
 
 
 # -- drop tests --------------------------------------------------------------------------------
@@ -348,7 +336,7 @@ def test_energy_kept_in_a_closed_room(precision, frames):
     1/2 m v_max^2 + m g (room height), never more (no gain), whatever the number of frames."""
     half = 1.0
     swarm, mass = closed_room_swarm(64, seed=3, half=half)
-    sim = ws.Simulator(ws.Scene(room(half)), swarm, precision=precision)
+    sim = ws.Simulator(ws.Scene(closed_room(half)), swarm, precision=precision)
     e0 = sim.initial_energy.astype(np.float64)
     tol = ROUND_ULPS * EPS[precision] * (0.5 * mass * 5.0**2 + mass * G * 2.0 * half)
     p_tol = PIECE_ULPS * EPS[precision] * (2.0 * half + 5.0 * DT) * (MAX_BOUNCES + 1)
@@ -423,7 +411,7 @@ def plates_in_a_room(rng, half, half_thickness, count=6):
                              half_extents=np.tile([0.4 * half, half_thickness, 0.4 * half],
                                                   (count, 1)),
                              rotation=random_unit_quaternions(rng, count))
-    return ws.RoundedBoxes.concatenate([room(half), plates])
+    return ws.RoundedBoxes.concatenate([closed_room(half), plates])
 
 
 @pytest.mark.parametrize("half_thickness", [0.0, 1e-3])
@@ -464,7 +452,7 @@ def test_narrow_wedge_caps_and_never_lets_a_sphere_in():
         center=[(math.sin(tilt), math.cos(tilt), 0.0), (-math.sin(tilt), math.cos(tilt), 0.0)],
         half_extents=[(1.0, 0.0, 0.5)] * 2,
         rotation=[about_z(math.pi / 2 - tilt), about_z(math.pi / 2 + tilt)])
-    boxes = ws.RoundedBoxes.concatenate([plates, room(3.0)])
+    boxes = ws.RoundedBoxes.concatenate([plates, closed_room(3.0)])
     rng = np.random.default_rng(0)
     n, r = 64, 0.05
     x = rng.uniform(-0.05, 0.05, n)
@@ -694,7 +682,7 @@ def test_no_spin_variant_leaves_orientation_and_angular_momentum_as_given():
     swarm, _ = closed_room_swarm(n, seed=8)
     orientation = random_unit_quaternions(rng, n)
     swarm = ws.Swarm(swarm.position, swarm.velocity, radius=0.05, orientation=orientation)
-    sim = ws.Simulator(ws.Scene(room(1.0)), swarm)
+    sim = ws.Simulator(ws.Scene(closed_room(1.0)), swarm)
     assert sim.spin is False
     sim.step(300)
     state = sim.state()

@@ -6,7 +6,7 @@ independent formula (distance to the core box minus the radius), not the kernels
 """
 
 import numpy as np
-from conftest import TOLERANCES
+from conftest import TOLERANCES, shaped_half_extents
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -20,15 +20,7 @@ def boxes_and_segments(draw):
     seed = draw(st.integers(0, 2**32 - 1))
     rng = np.random.default_rng(seed)
     kind = draw(st.sampled_from(["box", "plate", "stick", "point", "cube"]))
-    h = rng.uniform(0.05, 2.0, 3)
-    if kind == "plate":
-        h[rng.integers(3)] = 0.0
-    elif kind == "stick":
-        h[rng.choice(3, 2, replace=False)] = 0.0
-    elif kind == "point":
-        h[:] = 0.0
-    elif kind == "cube":
-        h[:] = h[0]
+    h = shaped_half_extents(rng, kind, 0.05, 2.0)
     rb = draw(st.sampled_from([0.0, 0.01, 0.1, 0.5]))
     q = rng.normal(size=4)
     center = rng.uniform(-5, 5, 3)

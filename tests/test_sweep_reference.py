@@ -11,6 +11,7 @@ same ``t``), so they are compared only where the reference is a face-interior hi
 
 import numpy as np
 import pytest
+from conftest import shaped_half_extents
 from reference import rounded_box_sdf, sweep_reference_batch
 
 import warpsim as ws
@@ -24,13 +25,7 @@ BANDS = {
 
 
 def _random_box(rng, kind):
-    h = rng.uniform(0.05, 1.5, 3)
-    if kind == "plate":
-        h[rng.integers(3)] = 0.0
-    elif kind == "stick":
-        h[rng.choice(3, 2, replace=False)] = 0.0
-    elif kind == "point":
-        h[:] = 0.0
+    h = shaped_half_extents(rng, kind, 0.05, 1.5)
     rb = float(rng.choice([0.0, 0.05, 0.3])) if kind == "box" else float(rng.choice([0.05, 0.3]))
     return ws.RoundedBox(center=rng.uniform(-3, 3, 3), half_extents=h,
                          rotation=rng.normal(size=4), radius=rb)
