@@ -25,8 +25,6 @@ from .dynamics import dynamics_funcs
 from .nearest import model_nearest_hit
 from .precision import Precision
 
-wp.set_module_options({"enable_backward": False})
-
 #: With contact losses, approach speeds up to this many frames of gravity make a resting
 #: (sliding) contact: below that a lossy ball would only decay through sub-frame hops.
 RESTING_FRAMES_LOSSY = 2.0

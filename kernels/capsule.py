@@ -14,8 +14,6 @@ import warp as wp
 
 from .precision import Precision
 
-wp.set_module_options({"enable_backward": False})
-
 
 @cache
 def capsule_funcs(p: Precision) -> SimpleNamespace:
@@ -41,9 +39,10 @@ def capsule_funcs(p: Precision) -> SimpleNamespace:
         if b < ZERO:
             disc = b * b - a2 * c
             if disc >= ZERO:
-                t = c / (-b + wp.sqrt(disc))
-                if t <= ONE:
+                root = c / (-b + wp.sqrt(disc))
+                if root <= ONE:
                     hit = 1
+                    t = root
         return hit, t
 
     @wp.func

@@ -9,8 +9,7 @@ from .bounce import bounce_funcs
 from .dynamics import dynamics_funcs
 from .nearest import model_nearest_hit
 from .precision import precision
-
-wp.set_module_options({"enable_backward": False})
+from .variant import variant_kernel
 
 
 @cache
@@ -29,7 +28,7 @@ def collide_kernel(precision_name: str, broad_phase: bool):
     TWO = scalar(2.0)
     ONE = scalar(1.0)
 
-    @wp.kernel(module="unique")
+    @variant_kernel
     def collide_boxes_kernel(
         # Model:
         box_center: wp.array(dtype=vec3),
@@ -42,7 +41,7 @@ def collide_kernel(precision_name: str, broad_phase: bool):
         # In:
         position_in: wp.array(dtype=vec3),
         velocity_in: wp.array(dtype=vec3),
-        radius_in: wp.array(dtype=scalar),
+        radius: wp.array(dtype=scalar),
         # Out:
         box_out: wp.array(dtype=wp.int32),
         t_out: wp.array(dtype=scalar),
@@ -55,7 +54,7 @@ def collide_kernel(precision_name: str, broad_phase: bool):
         a = position_in[i]
         v = velocity_in[i]
         d = v * dt
-        box, t, n = nearest_hit(a, d, radius_in[i], box_center, box_rotation,
+        box, t, n = nearest_hit(a, d, radius[i], box_center, box_rotation,
                                 box_half_extents, box_radius, box_extent, box_bvh)
         contact = a + t * d
         new_v = v
@@ -92,7 +91,7 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
     kinetic_energy = dynamics_funcs(p).kinetic_energy
     ZERO = scalar(0.0)
 
-    @wp.kernel(module="unique")
+    @variant_kernel
     def bounce_spheres_kernel(
         # Model:
         box_center: wp.array(dtype=vec3),
@@ -108,8 +107,8 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         # In:
         position_in: wp.array(dtype=vec3),
         velocity_in: wp.array(dtype=vec3),
-        radius_in: wp.array(dtype=scalar),
-        mass_in: wp.array(dtype=scalar),
+        radius: wp.array(dtype=scalar),
+        mass: wp.array(dtype=scalar),
         angular_momentum_in: wp.array(dtype=vec3),
         # Out:
         bounces_out: wp.array(dtype=wp.int32),
@@ -120,10 +119,10 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
     ):
         i = wp.tid()
         v = velocity_in[i]
-        m = mass_in[i]
+        m = mass[i]
         zero = vec3(ZERO, ZERO, ZERO)
         x, v_new, L, energy, bounces, capped, supported = bounce_path(
-            position_in[i], v, radius_in[i], m, angular_momentum_in[i], kinetic_energy(m, v),
+            position_in[i], v, radius[i], m, angular_momentum_in[i], kinetic_energy(m, v),
             zero, zero, dt, friction, max_rot, retention,
             box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh)
         bounces_out[i] = bounces

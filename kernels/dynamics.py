@@ -14,8 +14,6 @@ import warp as wp
 
 from .precision import Precision
 
-wp.set_module_options({"enable_backward": False})
-
 #: Moment of inertia of a solid sphere, as a fraction of ``m r^2``.
 SOLID_SPHERE_INERTIA = 0.4
 

@@ -23,8 +23,7 @@ import warp as wp
 from .bounce import bounce_funcs
 from .dynamics import RESET_ULPS, dynamics_funcs
 from .precision import precision
-
-wp.set_module_options({"enable_backward": False})
+from .variant import variant_kernel
 
 
 @cache
@@ -57,7 +56,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
     HALF = scalar(0.5)
     RESET_SLACK = scalar(RESET_ULPS * p.eps)
 
-    @wp.kernel(module="unique")
+    @variant_kernel
     def advance_frame(
         # Model:
         box_center: wp.array(dtype=vec3),
@@ -86,8 +85,8 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         energy_out: wp.array(dtype=scalar),
         angular_momentum_out: wp.array(dtype=vec3),
         orientation_out: wp.array(dtype=quat),
-        bounce_count: wp.array(dtype=wp.int32),
-        capped_count: wp.array(dtype=wp.int32),
+        bounce_count_out: wp.array(dtype=wp.int32),
+        capped_count_out: wp.array(dtype=wp.int32),
     ):
         i = wp.tid()
         r = radius[i]
@@ -123,7 +122,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
             angular_momentum_out[i] = L
             rot = rotation_vector(L, inertia(m, r), max_rot)
             orientation_out[i] = integrate_orientation(orientation_in[i], rot, dt)
-        bounce_count[i] += bounces
-        capped_count[i] += capped
+        bounce_count_out[i] += bounces
+        capped_count_out[i] += capped
 
     return advance_frame

@@ -18,8 +18,6 @@ import warp as wp
 from .precision import Precision
 from .rounded_box import rounded_box_funcs
 
-wp.set_module_options({"enable_backward": False})
-
 #: Relative slack on the bounding-box reject, so rounding in the bounds can never reject a box
 #: the segment touches (it only lets a few more boxes through to the exact test).
 REJECT_SLACK = 1.0e-3

@@ -18,8 +18,6 @@ from .capsule import capsule_funcs
 from .precision import Precision
 from .slab import slab_funcs
 
-wp.set_module_options({"enable_backward": False})
-
 
 @cache
 def rounded_box_funcs(p: Precision) -> SimpleNamespace:

@@ -12,8 +12,6 @@ import warp as wp
 
 from .precision import Precision
 
-wp.set_module_options({"enable_backward": False})
-
 
 @cache
 def slab_funcs(p: Precision) -> SimpleNamespace:

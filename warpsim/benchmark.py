@@ -34,9 +34,11 @@ import numpy as np
 import warp as wp
 
 from .collide import collide_boxes
-from .device import BVH_MIN_BOXES, DeviceBoxes, precision, resolve_device, to_device, use_bvh
+from .device import BVH_MIN_BOXES, resolve_device, use_bvh
+from .kernels.precision import precision
 from .kernels.collide_kernels import collide_kernel
 from .kernels.frame_kernel import frame_kernel
+from .model import Spheres, kernel_arguments, put_model, to_device
 from .numpy_sweep import sweep_boxes_numpy
 from .obstacles import RoundedBoxes
 from .scene import Scene
@@ -324,21 +326,24 @@ def device_sweep(boxes, position, velocity, radius, dt, precision_name, device,
     p = precision(precision_name)
     n = len(position)
     kernel = collide_kernel(p.name, bvh)
-    model = DeviceBoxes.upload(boxes, p, device, bvh=bvh)
-    inputs = model.inputs() + [
-        p.scalar(dt), to_device(position, p.vec3, p, device),
-        to_device(velocity, p.vec3, p, device), to_device(radius, p.scalar, p, device)]
-    box = wp.empty(n, dtype=wp.int32, device=device)
-    outs = [wp.empty(n, dtype=p.scalar, device=device)] + [
-        wp.empty(n, dtype=p.vec3, device=device) for _ in range(4)]
-
-    held = (model, inputs)  # the inputs carry the BVH's id: its owner must live as long
+    model = put_model(boxes, p, device, bvh=bvh, dt=dt)
+    out = {"box_out": wp.empty(n, dtype=wp.int32, device=device),
+           "t_out": wp.empty(n, dtype=p.scalar, device=device)}
+    for name in ("contact_out", "normal_out", "new_position_out", "new_velocity_out"):
+        out[name] = wp.empty(n, dtype=p.vec3, device=device)
+    args = kernel_arguments(
+        kernel, model=model, outputs=out,
+        spheres=Spheres(radius=to_device(radius, p.scalar, p, device), mass=None),
+        state_in={"position": to_device(position, p.vec3, p, device),
+                  "velocity": to_device(velocity, p.vec3, p, device)})
+    held = (model, args)  # the arguments carry the BVH's id: its owner must live as long
 
     def launch() -> None:
-        wp.launch(kernel, dim=n, inputs=held[1], outputs=[box] + outs, device=device)
+        wp.launch(kernel, dim=n, inputs=held[1], device=device)
 
     def read() -> dict:
-        return {"box": box.numpy(), "t": outs[0].numpy(), "normal": outs[2].numpy()}
+        return {"box": out["box_out"].numpy(), "t": out["t_out"].numpy(),
+                "normal": out["normal_out"].numpy()}
 
     return launch, read
 

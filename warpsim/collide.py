@@ -8,8 +8,10 @@ import numpy as np
 import warp as wp
 
 from . import validation as check
-from .device import DeviceBoxes, precision, resolve_device, to_device, use_bvh
+from .device import resolve_device, use_bvh
+from .kernels import precision as fp
 from .kernels.collide_kernels import bounce_kernel, collide_kernel
+from .model import Spheres, launch, put_model, to_device
 from .obstacles import RoundedBox, RoundedBoxes
 
 
@@ -76,20 +78,21 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
     bvh = use_bvh(broad_phase, len(boxes))
     dev = resolve_device(device)
 
-    model = DeviceBoxes.upload(boxes, p, dev, bvh=bvh)
-    out_box = wp.empty(n, dtype=wp.int32, device=dev)
-    outs = [wp.empty(n, dtype=p.scalar, device=dev)] + [
-        wp.empty(n, dtype=p.vec3, device=dev) for _ in range(4)]
-    wp.launch(collide_kernel(p.name, bvh), dim=n, device=dev,
-              inputs=model.inputs() + [p.scalar(dt),
-                                       to_device(pos, p.vec3, p, dev),
-                                       to_device(vel, p.vec3, p, dev),
-                                       to_device(rad, p.scalar, p, dev)],
-              outputs=[out_box] + outs)
-    box = out_box.numpy()
-    t, contact, normal, new_pos, new_vel = (o.numpy() for o in outs)
-    return Contacts(hit=box >= 0, t=t, position=contact, normal=normal, new_position=new_pos,
-                    new_velocity=new_vel, box=box)
+    model = put_model(boxes, p, dev, bvh=bvh, dt=dt)
+    spheres = Spheres(radius=to_device(rad, p.scalar, p, dev), mass=None)
+    state = {"position": to_device(pos, p.vec3, p, dev),
+             "velocity": to_device(vel, p.vec3, p, dev)}
+    out = {"box_out": wp.empty(n, dtype=wp.int32, device=dev),
+           "t_out": wp.empty(n, dtype=p.scalar, device=dev)}
+    for name in ("contact_out", "normal_out", "new_position_out", "new_velocity_out"):
+        out[name] = wp.empty(n, dtype=p.vec3, device=dev)
+    launch(collide_kernel(p.name, bvh), n, dev, model=model, spheres=spheres,
+           state_in=state, outputs=out)
+    box = out["box_out"].numpy()
+    return Contacts(hit=box >= 0, t=out["t_out"].numpy(), position=out["contact_out"].numpy(),
+                    normal=out["normal_out"].numpy(),
+                    new_position=out["new_position_out"].numpy(),
+                    new_velocity=out["new_velocity_out"].numpy(), box=box)
 
 
 def collide_box(position, velocity, radius, box: RoundedBox, dt: float, *, device=None,
@@ -105,8 +108,9 @@ def collide_box(position, velocity, radius, box: RoundedBox, dt: float, *, devic
                          precision=precision, broad_phase="brute")
 
 
-def precision_of(name: str):
-    return precision(check.precision(name))
+def precision_of(name: str) -> fp.Precision:
+    """The kernel types of a checked precision name."""
+    return fp.precision(check.precision(name))
 
 
 @dataclass
@@ -175,19 +179,20 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
     dev = resolve_device(device)
 
     kernel = bounce_kernel(p.name, max_bounces, friction > 0.0, retention < 1.0, bvh)
-    model = DeviceBoxes.upload(boxes, p, dev, bvh=bvh)
-    bounces = wp.empty(n, dtype=wp.int32, device=dev)
-    capped = wp.empty(n, dtype=wp.int32, device=dev)
-    outs = [wp.empty(n, dtype=p.vec3, device=dev) for _ in range(3)]
-    wp.launch(kernel, dim=n, device=dev,
-              inputs=model.inputs() + [p.scalar(dt), p.scalar(friction), p.scalar(max_rot),
-                                       p.scalar(retention),
-                                       to_device(pos, p.vec3, p, dev),
-                                       to_device(vel, p.vec3, p, dev),
-                                       to_device(rad, p.scalar, p, dev),
-                                       to_device(mas, p.scalar, p, dev),
-                                       to_device(mom, p.vec3, p, dev)],
-              outputs=[bounces, capped] + outs)
+    model = put_model(boxes, p, dev, bvh=bvh, dt=dt, friction=friction,
+                      max_angular_speed=max_rot, energy_retention=retention)
+    spheres = Spheres(radius=to_device(rad, p.scalar, p, dev),
+                      mass=to_device(mas, p.scalar, p, dev))
+    state = {"position": to_device(pos, p.vec3, p, dev),
+             "velocity": to_device(vel, p.vec3, p, dev),
+             "angular_momentum": to_device(mom, p.vec3, p, dev)}
+    out = {"bounces_out": wp.empty(n, dtype=wp.int32, device=dev),
+           "capped_out": wp.empty(n, dtype=wp.int32, device=dev)}
+    for name in ("position_out", "velocity_out", "angular_momentum_out"):
+        out[name] = wp.empty(n, dtype=p.vec3, device=dev)
+    launch(kernel, n, dev, model=model, spheres=spheres, state_in=state, outputs=out)
+    bounces, capped = out["bounces_out"], out["capped_out"]
+    outs = [out["position_out"], out["velocity_out"], out["angular_momentum_out"]]
     b = bounces.numpy()
     x, v, L = (o.numpy() for o in outs)
     return Bounces(hit=b > 0, bounces=b, capped=capped.numpy() > 0, position=x, velocity=v,

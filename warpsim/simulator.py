@@ -10,8 +10,10 @@ import numpy as np
 import warp as wp
 
 from . import validation as check
-from .device import DeviceBoxes, precision, resolve_device, to_device, use_bvh
+from .device import resolve_device, use_bvh
+from .kernels import precision as fp
 from .kernels.frame_kernel import frame_kernel
+from .model import DeviceState, kernel_arguments, put_model, put_spheres, put_state
 from .scene import Scene
 from .swarm import Swarm
 from .trajectory import Trajectory
@@ -125,36 +127,41 @@ class Simulator:
     # -- set-up -------------------------------------------------------------------------------
 
     def _upload(self, swarm: Swarm) -> None:
-        p = precision(self.precision)
+        p = fp.precision(self.precision)
         dev = self.device
-        g = self.scene.gravity
+        scene = self.scene
         # the energy of the state the device holds: positions and velocities rounded to the
         # kernels' precision first, so that E and Ep agree to rounding from the first frame
         energy = self._energy_of(swarm.position.astype(p.np_dtype).astype(np.float64),
                                  swarm.velocity.astype(p.np_dtype).astype(np.float64))
         self._p = p
-        self._boxes = DeviceBoxes.upload(self.scene.boxes, p, dev,
-                                         bvh=self.broad_phase == "bvh")
-        self._radius = to_device(swarm.radius, p.scalar, p, dev)
-        self._mass = to_device(swarm.mass, p.scalar, p, dev)
-
-        def pair(values, dtype, written=True):
-            """Double buffer: frame k reads slot k % 2 and writes the other one. State that
-            the kernel never writes (spin without spin code) needs one array only."""
-            first = to_device(values, dtype, p, dev)
-            return (first, wp.empty_like(first) if written else first)
-
-        self._position = pair(swarm.position, p.vec3)
-        self._velocity = pair(swarm.velocity, p.vec3)
-        self._energy = pair(energy, p.scalar)
-        self._angular_momentum = pair(swarm.angular_momentum, p.vec3, self.spin)
-        self._orientation = pair(swarm.orientation, p.quat, self.spin)
-        self._bounce_count = wp.zeros(self._n, dtype=wp.int32, device=dev)
-        self._capped_count = wp.zeros(self._n, dtype=wp.int32, device=dev)
+        self.model = put_model(scene.boxes, p, dev, bvh=self.broad_phase == "bvh", dt=self.dt,
+                               gravity=scene.gravity, origin=self.energy_origin,
+                               friction=scene.friction,
+                               max_angular_speed=scene.max_angular_speed,
+                               energy_retention=scene.energy_retention)
+        """The scene on the device (:class:`warpsim.model.Model`)."""
+        self.spheres = put_spheres(swarm.radius, swarm.mass, p, dev)
+        """The per-sphere constants on the device (:class:`warpsim.model.Spheres`)."""
+        self.state_0 = put_state(p, dev, position=swarm.position, velocity=swarm.velocity,
+                                 energy=energy, angular_momentum=swarm.angular_momentum,
+                                 orientation=swarm.orientation)
+        """The current state on the device (:class:`warpsim.model.DeviceState`)."""
+        # a kernel without spin code neither reads nor writes L and the orientation
+        unwritten = () if self.spin else ("angular_momentum", "orientation")
+        self.state_1 = self.state_0.empty_like(share=unwritten)
+        """The state the next launch writes; swapped with :attr:`state_0` after it."""
+        self.counters = {"bounce_count_out": wp.zeros(self._n, dtype=wp.int32, device=dev),
+                         "capped_count_out": wp.zeros(self._n, dtype=wp.int32, device=dev)}
+        """Per-sphere counters the kernel adds to (contacts taken, sphere-frames capped)."""
         self._initial_energy = energy
-        self._params = [p.vec3(*g), p.vec3(*self.energy_origin), p.scalar(self.dt),
-                        p.scalar(self.scene.friction), p.scalar(self.scene.max_angular_speed),
-                        p.scalar(self.scene.energy_retention)]
+        # the two argument lists (state_0 -> state_1 and back), built once by name
+        self._launch_args = [self._arguments(self.state_0, self.state_1),
+                             self._arguments(self.state_1, self.state_0)]
+
+    def _arguments(self, state_in: DeviceState, state_out: DeviceState) -> list:
+        return kernel_arguments(self._kernel, model=self.model, spheres=self.spheres,
+                                state_in=state_in, state_out=state_out, outputs=self.counters)
 
     # -- stepping -----------------------------------------------------------------------------
 
@@ -169,17 +176,9 @@ class Simulator:
         return time.perf_counter() - start
 
     def _launch(self) -> None:
-        cur = self.frame % 2
-        nxt = 1 - cur
-        wp.launch(
-            self._kernel, dim=self._n, device=self.device,
-            inputs=self._boxes.inputs() + self._params + [
-                self._radius, self._mass,
-                self._position[cur], self._velocity[cur], self._energy[cur],
-                self._angular_momentum[cur], self._orientation[cur]],
-            outputs=[self._position[nxt], self._velocity[nxt], self._energy[nxt],
-                     self._angular_momentum[nxt], self._orientation[nxt],
-                     self._bounce_count, self._capped_count])
+        wp.launch(self._kernel, dim=self._n, device=self.device, inputs=self._launch_args[0])
+        self.state_0, self.state_1 = self.state_1, self.state_0
+        self._launch_args.reverse()
         self.frame += 1
 
     def step(self, frames: int = 1) -> None:
@@ -222,21 +221,20 @@ class Simulator:
                           radius=self._radius_host.copy())
 
     def _record(self):
-        cur = self.frame % 2
-        return (self.frame, self._position[cur].numpy().copy(),
-                self._orientation[cur].numpy().copy())
+        return (self.frame, self.state_0.position.numpy().copy(),
+                self.state_0.orientation.numpy().copy())
 
     # -- read-out -----------------------------------------------------------------------------
 
     def state(self) -> State:
         """A numpy copy of the current state."""
-        cur = self.frame % 2
+        s = self.state_0
         return State(frame=self.frame,
-                     position=self._position[cur].numpy().copy(),
-                     velocity=self._velocity[cur].numpy().copy(),
-                     angular_momentum=self._angular_momentum[cur].numpy().copy(),
-                     orientation=self._orientation[cur].numpy().copy(),
-                     energy=self._energy[cur].numpy().copy())
+                     position=s.position.numpy().copy(),
+                     velocity=s.velocity.numpy().copy(),
+                     angular_momentum=s.angular_momentum.numpy().copy(),
+                     orientation=s.orientation.numpy().copy(),
+                     energy=s.energy.numpy().copy())
 
     @property
     def initial_energy(self) -> np.ndarray:
@@ -262,9 +260,10 @@ class Simulator:
     @property
     def stats(self) -> Stats:
         """Bounce and cap counters since the start, and the time spent stepping."""
-        capped = self._capped_count.numpy()
+        capped = self.counters["capped_count_out"].numpy()
+        bounces = self.counters["bounce_count_out"].numpy()
         return Stats(frames=self.frame, sphere_frames=self.frame * self._n,
-                     bounces=int(self._bounce_count.numpy().astype(np.int64).sum()),
+                     bounces=int(bounces.astype(np.int64).sum()),
                      capped=int(capped.astype(np.int64).sum()),
                      capped_spheres=int(np.count_nonzero(capped)), seconds=self._seconds)
 

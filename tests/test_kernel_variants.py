@@ -1,0 +1,108 @@
+"""Every kernel every factory can return: no backward code, and arguments found by name.
+
+The factories are enumerated over all their feature flags; a kernel object is cheap to make (no
+compile happens until a launch), so the whole product is checked.
+"""
+
+import itertools
+
+import numpy as np
+import pytest
+
+import warpsim as ws
+from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
+from warpsim.kernels.frame_kernel import frame_kernel
+from warpsim.kernels.variant import KERNEL_OPTIONS
+from warpsim.model import DeviceState, Model, Spheres, kernel_arguments, parameter_names
+
+PRECISIONS = ("float32", "float64")
+FLAGS = (False, True)
+
+
+def all_kernels():
+    """(label, kernel) for every variant of every factory (two values of max_bounces)."""
+    out = []
+    for prec, bvh in itertools.product(PRECISIONS, FLAGS):
+        out.append((f"collide/{prec}/bvh={bvh}", collide_kernel(prec, bvh)))
+    for prec, cap, spin, lossy, bvh in itertools.product(PRECISIONS, (1, 8), FLAGS, FLAGS, FLAGS):
+        out.append((f"bounce/{prec}/{cap}/{spin}/{lossy}/{bvh}",
+                    bounce_kernel(prec, cap, spin, lossy, bvh)))
+    for prec, cap, spin, corr, lossy, bvh in itertools.product(PRECISIONS, (1, 8), FLAGS, FLAGS,
+                                                               FLAGS, FLAGS):
+        out.append((f"frame/{prec}/{cap}/{spin}/{corr}/{lossy}/{bvh}",
+                    frame_kernel(prec, cap, spin, corr, lossy, bvh)))
+    return out
+
+
+KERNELS = all_kernels()
+
+
+@pytest.mark.parametrize("label,kernel", KERNELS, ids=[k[0] for k in KERNELS])
+def test_no_backward_code(label, kernel):
+    for key, value in KERNEL_OPTIONS.items():
+        assert kernel.options.get(key) is value, label
+        assert kernel.module.options.get(key) is value, label
+
+
+def model_fields() -> set[str]:
+    return {f for f in Model.__dataclass_fields__}
+
+
+def state_fields() -> set[str]:
+    return {f for f in DeviceState.__dataclass_fields__}
+
+
+COLLIDE_OUTPUTS = {"box_out", "t_out", "contact_out", "normal_out", "new_position_out",
+                   "new_velocity_out"}
+BOUNCE_OUTPUTS = {"bounces_out", "capped_out", "position_out", "velocity_out",
+                  "angular_momentum_out"}
+FRAME_COUNTERS = {"bounce_count_out", "capped_count_out"}
+
+
+@pytest.mark.parametrize("label,kernel", KERNELS, ids=[k[0] for k in KERNELS])
+def test_parameter_names_are_fields(label, kernel):
+    """Every parameter is a model field, a sphere constant, ``<state field>_in`` or an output
+    ending in ``_out``: the launch helper finds each by name, never by position."""
+    sphere_fields = set(Spheres.__dataclass_fields__)
+    outputs = COLLIDE_OUTPUTS | BOUNCE_OUTPUTS | FRAME_COUNTERS
+    for name in parameter_names(kernel):
+        if name.endswith("_in"):
+            assert name[:-3] in state_fields(), (label, name)
+        elif name.endswith("_out"):
+            assert name[:-4] in state_fields() or name in outputs, (label, name)
+        else:
+            assert name in model_fields() | sphere_fields, (label, name)
+
+
+def test_every_simulator_argument_is_the_named_array():
+    """The frame kernel's arguments, as the simulator assembles them, are the very arrays of the
+    named fields (a swapped pair of same-typed arrays would fail here)."""
+    boxes = ws.RoundedBoxes(center=[[0, 0, 0], [3, 0, 0]], half_extents=[[1, 0.1, 1]] * 2)
+    swarm = ws.Swarm(position=[[0, 1, 0], [3, 1, 0]], velocity=[[1, 0, 0], [0, 1, 0]],
+                     radius=0.1)
+    sim = ws.Simulator(ws.Scene(boxes, friction=0.1), swarm, device="cpu")
+    args = kernel_arguments(sim._kernel, model=sim.model, spheres=sim.spheres,
+                            state_in=sim.state_0, state_out=sim.state_1, outputs=sim.counters)
+    for name, value in zip(parameter_names(sim._kernel), args, strict=True):
+        if name.endswith("_in"):
+            assert value is getattr(sim.state_0, name[:-3])
+        elif name.endswith("_out") and name[:-4] in state_fields():
+            assert value is getattr(sim.state_1, name[:-4])
+        elif name.endswith("_out"):
+            assert value is sim.counters[name]
+        elif name in model_fields():
+            assert value is getattr(sim.model, name) or value == getattr(sim.model, name)
+        else:
+            assert value is getattr(sim.spheres, name)
+
+
+def test_missing_or_ambiguous_source_is_an_error():
+    kernel = collide_kernel("float32", False)
+    with pytest.raises(KeyError, match="no source provides parameter 'box_center'"):
+        kernel_arguments(kernel, state_in={}, outputs={})
+    sim_boxes = ws.RoundedBoxes(center=[[0, 0, 0]], half_extents=[[1, 1, 1]])
+    sim = ws.Simulator(ws.Scene(sim_boxes), ws.Swarm([[0, 3, 0]], [[0, 0, 0]]), device="cpu")
+    with pytest.raises(KeyError, match="both"):
+        kernel_arguments(sim._kernel, model=sim.model, spheres=sim.spheres,
+                         values={"dt": np.float32(0.1)}, state_in=sim.state_0,
+                         state_out=sim.state_1, outputs=sim.counters)

@@ -1,0 +1,259 @@
+"""The device side of a simulation: one model, one state, one way to launch a kernel.
+
+Three bundles of Warp arrays, each made at one validating boundary:
+
+- :class:`Model` (:func:`put_model`): the static scene (obstacles and physics constants). Its
+  field names *are* the kernels' ``# Model`` parameter names (``box_center``, ``gravity``, ...).
+- :class:`Spheres` (:func:`put_spheres`): the per-sphere constants (``radius``, ``mass``).
+- :class:`DeviceState` (:func:`put_state`): the per-sphere state that a frame changes. A kernel
+  reads it through parameters named ``<field>_in`` and writes a second one through
+  ``<field>_out``; the simulator swaps ``state_0`` and ``state_1`` after each launch.
+
+:func:`kernel_arguments` builds a launch's argument list from these bundles *by parameter name*
+(``position_in`` is ``state_in.position``, ``box_radius`` is ``model.box_radius``, any other
+``*_out`` comes from ``outputs``), so a reordering of a kernel's parameters can never silently swap
+two arrays, and every launch of the package goes through :func:`launch`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+import warp as wp
+
+from .device import bvh_bounds
+from .kernels.precision import Precision
+from .obstacles import RoundedBoxes
+
+IN_SUFFIX = "_in"
+OUT_SUFFIX = "_out"
+
+
+@dataclass
+class Model:
+    """A scene's obstacles and physics constants on one device, in one precision.
+
+    Field names are the kernels' parameter names. Per obstacle (``K`` boxes), world frame:
+
+    Attributes:
+        box_center: box centres [m], shape (K,) of vec3.
+        box_rotation: local -> world rotation matrices, shape (K,) of mat33.
+        box_half_extents: core half extents [m], local frame, shape (K,) of vec3.
+        box_radius: rounding radii [m], shape (K,).
+        box_extent: half sizes of each rounded box's world-axis-aligned bounding box [m], shape
+            (K,) of vec3, for the cheap per-box reject.
+        box_bvh: id of a :class:`warp.Bvh` over the reject bounds (float32, rounded outward), or
+            0 when no BVH was built (then kernels built without the BVH never read it).
+        gravity: [m/s^2], world frame. origin: reference point of the potential energy [m].
+        dt: frame duration [s]. friction: ``k_f`` [kg/s]. max_rot: clamp on ``|Rot|`` [rad/s].
+        retention: fraction of the kinetic energy kept at each contact.
+        precision: the :class:`~warpsim.kernels.precision.Precision` of every array and value.
+        device: the Warp device holding the arrays.
+        bvh: the :class:`warp.Bvh` behind ``box_bvh`` (kept here so that it lives as long as the
+            model), or None.
+    """
+
+    box_center: wp.array
+    box_rotation: wp.array
+    box_half_extents: wp.array
+    box_radius: wp.array
+    box_extent: wp.array
+    box_bvh: wp.uint64
+    gravity: object
+    origin: object
+    dt: object
+    friction: object
+    max_rot: object
+    retention: object
+    precision: Precision
+    device: object
+    bvh: wp.Bvh | None = None
+
+    @property
+    def box_count(self) -> int:
+        return int(self.box_center.shape[0])
+
+
+@dataclass
+class Spheres:
+    """Per-sphere constants on the device (``N`` spheres).
+
+    Attributes:
+        radius: sphere radii [m], shape (N,).
+        mass: sphere masses [kg], shape (N,).
+    """
+
+    radius: wp.array
+    mass: wp.array
+
+    def __len__(self) -> int:
+        return int(self.radius.shape[0])
+
+
+@dataclass
+class DeviceState:
+    """The per-sphere state one frame changes, on the device (``N`` spheres).
+
+    Attributes:
+        position: centres [m], world frame, shape (N,) of vec3.
+        velocity: velocities [m/s], shape (N,) of vec3 (for the linear model semi-implicit
+            Euler's step velocity; see ``kernels.frame_kernel``).
+        energy: total energy [J], shape (N,) (see ``kernels.frame_kernel``).
+        angular_momentum: [kg m^2/s], world frame, shape (N,) of vec3.
+        orientation: unit quaternions (x, y, z, w), body -> world, shape (N,) of quat.
+    """
+
+    position: wp.array
+    velocity: wp.array
+    energy: wp.array
+    angular_momentum: wp.array
+    orientation: wp.array
+
+    def empty_like(self, share: tuple[str, ...] = ()) -> DeviceState:
+        """A state of the same shapes to write into; the fields in ``share`` are the same arrays
+        (state a kernel variant never writes needs no second copy)."""
+        return DeviceState(**{f.name: getattr(self, f.name) if f.name in share
+                              else wp.empty_like(getattr(self, f.name)) for f in fields(self)})
+
+
+def to_device(values: np.ndarray, dtype, p: Precision, device) -> wp.array:
+    """A Warp array of ``dtype`` from float64 host values, cast to the precision's numpy type."""
+    return wp.array(np.ascontiguousarray(values, dtype=p.np_dtype), dtype=dtype, device=device)
+
+
+def put_model(boxes: RoundedBoxes, p: Precision, device, *, bvh: bool, dt: float,
+              gravity=(0.0, 0.0, 0.0), origin=(0.0, 0.0, 0.0), friction: float = 0.0,
+              max_angular_speed: float = 50.0, energy_retention: float = 1.0) -> Model:
+    """The obstacles and physics constants as a :class:`Model` on ``device``.
+
+    The values must already be validated (``warpsim.validation``; :class:`warpsim.Scene` and
+    :class:`warpsim.RoundedBoxes` are); here they are only converted, once.
+
+    Args:
+        boxes: the obstacles (float64, world frame).
+        p: precision of the arrays and scalars.
+        device: Warp device.
+        bvh: build a BVH over the boxes (the kernels' ``box_bvh``); ignored without boxes.
+        dt: frame duration [s]. gravity: [m/s^2]. origin: potential reference point [m].
+        friction: ``k_f`` [kg/s]. max_angular_speed: ``|Rot|`` clamp [rad/s].
+        energy_retention: kept fraction of kinetic energy per contact.
+    """
+    dtype = p.np_dtype
+    center = boxes.center.astype(dtype)
+    extent = boxes.world_extent().astype(dtype)
+    tree = None
+    if bvh and len(boxes):
+        lower, upper = bvh_bounds(center, extent)
+        # SAH on every device: the best trees for queries, and its builder caps the depth at
+        # the query stack's size (a static scene builds it once)
+        tree = wp.Bvh(wp.array(lower, dtype=wp.vec3f, device=device),
+                      wp.array(upper, dtype=wp.vec3f, device=device), constructor="sah")
+    return Model(
+        box_center=wp.array(center, dtype=p.vec3, device=device),
+        box_rotation=wp.array(boxes.rotation_matrices().astype(dtype), dtype=p.mat33,
+                              device=device),
+        box_half_extents=wp.array(boxes.half_extents.astype(dtype), dtype=p.vec3, device=device),
+        box_radius=wp.array(boxes.radius.astype(dtype), dtype=p.scalar, device=device),
+        box_extent=wp.array(extent, dtype=p.vec3, device=device),
+        box_bvh=wp.uint64(tree.id if tree is not None else 0),
+        gravity=p.vec3(*np.asarray(gravity, dtype=np.float64)),
+        origin=p.vec3(*np.asarray(origin, dtype=np.float64)),
+        dt=p.scalar(dt), friction=p.scalar(friction), max_rot=p.scalar(max_angular_speed),
+        retention=p.scalar(energy_retention), precision=p, device=device, bvh=tree)
+
+
+def put_spheres(radius: np.ndarray, mass: np.ndarray, p: Precision, device) -> Spheres:
+    """Validated per-sphere constants (float64, (N,)) as :class:`Spheres` on ``device``."""
+    return Spheres(radius=to_device(radius, p.scalar, p, device),
+                   mass=to_device(mass, p.scalar, p, device))
+
+
+def put_state(p: Precision, device, *, position, velocity, energy, angular_momentum,
+              orientation) -> DeviceState:
+    """Validated per-sphere state (float64 host arrays) as a :class:`DeviceState`."""
+    return DeviceState(position=to_device(position, p.vec3, p, device),
+                       velocity=to_device(velocity, p.vec3, p, device),
+                       energy=to_device(energy, p.scalar, p, device),
+                       angular_momentum=to_device(angular_momentum, p.vec3, p, device),
+                       orientation=to_device(orientation, p.quat, p, device))
+
+
+def parameter_names(kernel) -> list[str]:
+    """The parameter names of a Warp kernel, in order."""
+    return [arg.label for arg in kernel.adj.args]
+
+
+def _field(source, name: str):
+    """``source[name]`` or ``source.name``; None when the source or the entry is missing."""
+    if source is None:
+        return None
+    if isinstance(source, dict):
+        return source.get(name)
+    return getattr(source, name, None)
+
+
+def kernel_arguments(kernel, *, model: Model | None = None, spheres: Spheres | None = None,
+                     state_in: DeviceState | None = None, state_out: DeviceState | None = None,
+                     outputs=None, values: dict | None = None,
+                     rows: slice | None = None) -> list:
+    """A launch's arguments for ``kernel``, each looked up by its parameter's name.
+
+    Rules, per parameter ``name``:
+
+    - ``<field>_in``: ``state_in.<field>``;
+    - ``<field>_out``: ``state_out.<field>`` when the state has that field, else
+      ``outputs[name]`` (a dict or an object with that attribute: counters, query results);
+    - any other name: ``model.<name>``, else ``spheres.<name>``, else ``values[name]`` (plain
+      per-launch values such as a frame count).
+
+    Args:
+        kernel: a Warp kernel of this package.
+        model, spheres, state_in, state_out, outputs, values: the sources above.
+        rows: a slice of the spheres: every per-sphere array (of ``spheres``, the states and
+            ``outputs``) is passed as that slice (a view, no copy); a 2-D per-sphere output
+            (frames, N) is sliced along its second axis. The model is passed whole.
+
+    Returns:
+        The argument list in parameter order, for ``wp.launch(kernel, inputs=...)``.
+
+    Raises:
+        KeyError: a parameter that no source provides, or that two sources both provide (the
+            ambiguity would make the launch depend on lookup order).
+    """
+    args = []
+    for name in parameter_names(kernel):
+        per_sphere = True
+        if name.endswith(IN_SUFFIX):
+            value = _field(state_in, name[:-len(IN_SUFFIX)])
+            where = "state_in"
+        elif name.endswith(OUT_SUFFIX):
+            value = _field(state_out, name[:-len(OUT_SUFFIX)])
+            where = "state_out"
+            if value is None:
+                value = _field(outputs, name)
+                where = "outputs"
+        else:
+            found = [(src, v) for src, v in (("model", _field(model, name)),
+                                             ("spheres", _field(spheres, name)),
+                                             ("values", _field(values, name))) if v is not None]
+            if len(found) > 1:
+                raise KeyError(f"kernel {kernel.key}: parameter {name!r} is provided by both "
+                               f"{found[0][0]} and {found[1][0]}")
+            where, value = found[0] if found else ("", None)
+            per_sphere = where == "spheres"
+        if value is None:
+            raise KeyError(f"kernel {kernel.key}: no source provides parameter {name!r}")
+        if rows is not None and per_sphere and isinstance(value, wp.array):
+            value = value[rows] if value.ndim == 1 else value[:, rows]
+        args.append(value)
+    return args
+
+
+def launch(kernel, dim: int, device, **sources) -> None:
+    """Launch ``kernel`` over ``dim`` threads with the arguments of :func:`kernel_arguments`."""
+    wp.launch(kernel, dim=dim, device=device, inputs=kernel_arguments(kernel, **sources))
+
+
+__all__ = ["DeviceState", "Model", "Spheres", "kernel_arguments", "launch", "parameter_names",
+           "put_model", "put_spheres", "put_state", "to_device"]
