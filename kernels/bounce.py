@@ -21,8 +21,8 @@ from types import SimpleNamespace
 
 import warp as wp
 
-from .dynamics import dynamics_funcs
-from .nearest import model_nearest_hit
+from .dynamics import RESET_ULPS, dynamics_funcs
+from .nearest import model_nearest_hit, nearest_funcs
 from .precision import Precision
 
 #: With contact losses, approach speeds up to this many frames of gravity make a resting
@@ -38,6 +38,7 @@ RESTING_FRAMES_ELASTIC = 1.001
 #: "Touching at the start" for an elastic support: a gap along the normal of at most this many
 #: ulps of the coordinates (a sphere put on a floor far from the origin sits a few ulps off it).
 RESTING_GAP_ULPS = 16.0
+
 
 
 @cache
@@ -58,15 +59,45 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
     """
     scalar, vec3 = p.scalar, p.vec3
     nearest_hit = model_nearest_hit(p, broad_phase)
+    contact_centre = nearest_funcs(p).contact_centre
     dyn = dynamics_funcs(p)
     friction_spin = dyn.friction_spin
     potential = dyn.potential
     ZERO = scalar(0.0)
     ONE = scalar(1.0)
     TWO = scalar(2.0)
+    HALF = scalar(0.5)
     REST = scalar(RESTING_FRAMES_LOSSY if lossy else RESTING_FRAMES_ELASTIC)
     GAP_ULPS = scalar(RESTING_GAP_ULPS * p.eps)
+    RESET_SLACK = scalar(RESET_ULPS * p.eps)
     MAX_BOUNCES = int(max_bounces)
+
+    @wp.func
+    def clip_rise(contact: vec3, d: vec3, v: vec3, m: scalar, g: vec3, origin: vec3,
+                  energy: scalar):
+        """The rest of the path ``d`` after a contact, its rise cut to what ``energy`` allows.
+
+        The chord model reflects the whole rest of the frame's path, so a sub-frame hop (a
+        sphere released just above a floor, or any bounce at a large ``dt``) would climb higher
+        than its energy can take it; the true parabola would not. Only the part of ``d`` against
+        gravity is cut, so the sideways motion is untouched, and the rise allowed leaves the
+        sideways kinetic energy of ``v`` (which gravity never changes) in place; without
+        gravity nothing is cut.
+        """
+        out = d
+        g_len = wp.length(g)
+        if g_len > ZERO:
+            ep_c = potential(m, g, contact, origin)
+            ep_end = potential(m, g, contact + d, origin)
+            if ep_end - energy > RESET_SLACK * (wp.abs(energy) + wp.abs(ep_end)):
+                down = g / g_len
+                side = v - wp.dot(v, down) * down
+                spare = energy - ep_c - HALF * m * wp.dot(side, side)
+                allowed = wp.max(spare, ZERO) / (m * g_len)
+                rise = -wp.dot(d, down)
+                if rise > allowed:
+                    out = d + (rise - allowed) * down
+        return out
 
     @wp.func
     def bounce_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
@@ -108,7 +139,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                 done = 1
             else:
                 bounces += 1
-                contact = a + t * d
+                contact = contact_centre(a, t, d, n, box_radius[box] + r, box_extent[box])
                 if wp.static(spin):
                     L = friction_spin(L, v, n, r, m, dt, friction, max_rot)
                 vn = wp.dot(v, n)
@@ -131,6 +162,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                         keep = wp.sqrt(retention)
                         v = v * keep
                         d = d * keep
+                d = clip_rise(contact, d, v, m, g, origin, energy)
                 a = contact
         return a, v, L, energy, bounces, capped, supported
 

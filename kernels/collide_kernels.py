@@ -7,7 +7,7 @@ import warp as wp
 
 from .bounce import bounce_funcs
 from .dynamics import dynamics_funcs
-from .nearest import model_nearest_hit
+from .nearest import model_nearest_hit, nearest_funcs
 from .precision import precision
 from .variant import variant_kernel
 
@@ -25,6 +25,7 @@ def collide_kernel(precision_name: str, broad_phase: bool):
     p = precision(precision_name)
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     nearest_hit = model_nearest_hit(p, broad_phase)
+    contact_centre = nearest_funcs(p).contact_centre
     TWO = scalar(2.0)
     ONE = scalar(1.0)
 
@@ -61,7 +62,8 @@ def collide_kernel(precision_name: str, broad_phase: bool):
         new_p = contact
         if box >= 0:
             new_v = v - TWO * wp.dot(v, n) * n
-            new_p = contact + (ONE - t) * (d - TWO * wp.dot(d, n) * n)
+            start = contact_centre(a, t, d, n, box_radius[box] + radius[i], box_extent[box])
+            new_p = start + (ONE - t) * (d - TWO * wp.dot(d, n) * n)
         else:
             new_p = a + d
             contact = new_p

@@ -28,7 +28,7 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
 
     Returns:
         Namespace with ``inertia``, ``clamp_momentum``, ``rotation_vector``, ``friction_spin``,
-        ``potential``, ``speed_from_energy``, ``limit_speed_to_energy``, ``kinetic_energy`` and
+        ``potential``, ``energy_along_gravity``, ``kinetic_energy`` and
         ``integrate_orientation``.
     """
     scalar, vec3, quat = p.scalar, p.vec3, p.quat
@@ -89,43 +89,49 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
         return -m * wp.dot(g, position - origin)
 
     @wp.func
-    def speed_from_energy(v: vec3, energy: scalar, m: scalar, g: vec3, position: vec3,
-                          origin: vec3):
-        """``v`` rescaled to ``|v| = sqrt(2 (E - Ep) / m)``, direction kept.
+    def energy_along_gravity(u: vec3, energy: scalar, m: scalar, g: vec3, position: vec3,
+                             origin: vec3, raise_ok: int):
+        """``u`` with its kinetic energy set to ``E - Ep``, through the component along gravity.
 
-        A negative kinetic energy (float error near the top of an arc) gives ``v = 0``: never a
-        NaN. A zero velocity stays zero (it has no direction to keep). A mismatch within the
-        rounding of the energies (``RESET_ULPS``) leaves ``v`` unchanged.
+        The potential depends on the height only and gravity never changes the horizontal
+        velocity, so the energy is restored through ``u . g_hat``, its sign kept: a ball on a
+        flat frictionless floor keeps its horizontal speed. When the horizontal part alone holds
+        more than ``E - Ep``, the vertical part is dropped and the horizontal part scaled down.
+        Without gravity the whole velocity is scaled. ``E - Ep <= 0`` gives ``u = 0`` (never a
+        NaN); a vertical part of exactly 0 is not raised (it has no sign to keep). A mismatch
+        within the rounding of the energies (``RESET_ULPS``) leaves ``u`` bit for bit.
+
+        Args:
+            u: velocity [m/s]. energy: total energy ``E`` [J]. m: mass [kg]. g: gravity
+            [m/s^2]. position: [m]. origin: potential reference [m]. raise_ok: 1 to raise the
+            kinetic energy when it is below ``E - Ep`` (the reset), 0 to only ever lower it
+            (no energy gain, nothing put back).
         """
         ep = potential(m, g, position, origin)
         kinetic = energy - ep
-        speed = wp.length(v)
-        out = v
-        if kinetic <= ZERO:
-            out = vec3(ZERO, ZERO, ZERO)
-        elif speed > ZERO:
-            mismatch = wp.abs(kinetic - HALF * m * speed * speed)
-            if mismatch > RESET_SLACK * (wp.abs(energy) + wp.abs(ep)):
-                out = v * (wp.sqrt(TWO * kinetic / m) / speed)
-        return out
-
-    @wp.func
-    def limit_speed_to_energy(v: vec3, energy: scalar, m: scalar, g: vec3, position: vec3,
-                              origin: vec3):
-        """``v`` scaled down, never up, so that ``1/2 m |v|^2 + Ep <= E`` (no energy gain).
-
-        Without the full reset, semi-implicit Euler across a bounce can gain energy of order
-        ``m |g| |v| dt`` per contact; this one-sided bound removes the gain and nothing else.
-        """
-        kinetic = energy - potential(m, g, position, origin)
-        out = v
-        if kinetic <= ZERO:
-            out = vec3(ZERO, ZERO, ZERO)
-        else:
-            limit = TWO * kinetic / m
-            speed_sq = wp.dot(v, v)
-            if speed_sq > limit:
-                out = v * wp.sqrt(limit / speed_sq)
+        have = HALF * m * wp.dot(u, u)
+        out = u
+        if wp.abs(kinetic - have) > RESET_SLACK * (wp.abs(energy) + wp.abs(ep)) and (
+                raise_ok == 1 or kinetic < have):
+            if kinetic <= ZERO:
+                out = vec3(ZERO, ZERO, ZERO)
+            else:
+                g_len = wp.length(g)
+                if g_len > ZERO:
+                    down = g / g_len
+                    u_down = wp.dot(u, down)
+                    u_side = u - u_down * down
+                    side = HALF * m * wp.dot(u_side, u_side)
+                    if kinetic >= side:
+                        if u_down != ZERO:
+                            size = wp.sqrt(TWO * (kinetic - side) / m)
+                            if u_down < ZERO:
+                                size = -size
+                            out = u_side + size * down
+                    else:
+                        out = u_side * wp.sqrt(kinetic / side)
+                elif have > ZERO:
+                    out = u * wp.sqrt(kinetic / have)
         return out
 
     @wp.func
@@ -143,7 +149,6 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
 
     return SimpleNamespace(inertia=inertia, clamp_momentum=clamp_momentum,
                            rotation_vector=rotation_vector, friction_spin=friction_spin,
-                           potential=potential, speed_from_energy=speed_from_energy,
+                           potential=potential, energy_along_gravity=energy_along_gravity,
                            kinetic_energy=kinetic_energy,
-                           limit_speed_to_energy=limit_speed_to_energy,
                            integrate_orientation=integrate_orientation)

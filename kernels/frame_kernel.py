@@ -46,14 +46,14 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
     scalar, vec3, mat33, quat = p.scalar, p.vec3, p.mat33, p.quat
     bounce_path = bounce_funcs(p, max_bounces, spin, lossy, broad_phase).bounce_path
     dyn = dynamics_funcs(p)
-    speed_from_energy = dyn.speed_from_energy
-    limit_speed_to_energy = dyn.limit_speed_to_energy
+    energy_along_gravity = dyn.energy_along_gravity
     kinetic_energy = dyn.kinetic_energy
     potential = dyn.potential
     rotation_vector = dyn.rotation_vector
     inertia = dyn.inertia
     integrate_orientation = dyn.integrate_orientation
     HALF = scalar(0.5)
+    ZERO = scalar(0.0)
     RESET_SLACK = scalar(RESET_ULPS * p.eps)
 
     @variant_kernel
@@ -104,17 +104,28 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         # semi-implicit Euler's step velocity): semi-implicit Euler keeps that energy exactly
         # in free flight, so the reset changes nothing there and only removes drift.
         half_kick = gravity * (HALF * dt)
+        u = v + half_kick
         if supported == 1:
             # a resting contact is inelastic: keep the state and take its energy when that is
-            # lower by more than rounding (never more; no ratchet on rounding either)
+            # lower by more than rounding; never more: a state above E (rounding on a long
+            # slide) has its speed scaled down, along the surface it slides on
             ep = potential(m, gravity, x, origin)
-            state_energy = kinetic_energy(m, v + half_kick) + ep
-            if energy - state_energy > RESET_SLACK * (wp.abs(energy) + wp.abs(ep)):
+            state_energy = kinetic_energy(m, u) + ep
+            slack = RESET_SLACK * (wp.abs(energy) + wp.abs(ep))
+            if energy - state_energy > slack:
                 energy = state_energy
+            elif state_energy - energy > slack:
+                have = kinetic_energy(m, u)
+                kinetic = energy - ep
+                if kinetic <= ZERO or have <= ZERO:
+                    u = vec3(ZERO, ZERO, ZERO)
+                else:
+                    u = u * wp.sqrt(kinetic / have)
+                v = u - half_kick
         elif wp.static(energy_correction):
-            v = speed_from_energy(v + half_kick, energy, m, gravity, x, origin) - half_kick
+            v = energy_along_gravity(u, energy, m, gravity, x, origin, 1) - half_kick
         else:
-            v = limit_speed_to_energy(v + half_kick, energy, m, gravity, x, origin) - half_kick
+            v = energy_along_gravity(u, energy, m, gravity, x, origin, 0) - half_kick
         position_out[i] = x
         velocity_out[i] = v
         energy_out[i] = energy

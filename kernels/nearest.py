@@ -27,6 +27,13 @@ REJECT_SLACK = 1.0e-3
 #: reject would let through.
 BOUNDS_PAD_REL = 1.0e-6
 
+#: A contact centre ``A + t d`` carries rounding of a few ulps of ``|A|``, ``|d|`` and the box's
+#: size. When the Minkowski radius ``R = rb + r`` is below this many of those ulps (a point, or a
+#: tiny sphere, against a sharp box or a zero-thickness plate), that rounding can put the centre
+#: on the far side of the surface it hit, and the next leg would start behind it; the contact
+#: centre is then moved out along the normal by that many ulps, which no rounding undoes.
+SEPARATION_ULPS = 16.0
+
 #: Absolute pad [m] on the BVH queries, for coordinates at or near zero, where the relative pad
 #: vanishes (above float32's smallest subnormal, so the outward rounding still holds).
 BOUNDS_PAD_ABS = 1.0e-30
@@ -37,7 +44,8 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
     """Build the group-query ``@wp.func``s for one precision.
 
     Returns:
-        Namespace with ``sweep_box_world``, ``nearest_hit`` and ``nearest_hit_bvh``.
+        Namespace with ``sweep_box_world``, ``nearest_hit``, ``nearest_hit_bvh`` and
+        ``contact_centre``.
     """
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     sweep_rounded_box = rounded_box_funcs(p).sweep_rounded_box
@@ -47,6 +55,26 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
     HALF = scalar(0.5)
     PAD_REL = scalar(BOUNDS_PAD_REL)
     PAD_ABS = scalar(BOUNDS_PAD_ABS)
+    SEPARATION = scalar(SEPARATION_ULPS * p.eps)
+
+    @wp.func
+    def inf_norm(x: vec3):
+        return wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2]))
+
+    @wp.func
+    def contact_centre(a: vec3, t: scalar, d: vec3, normal: vec3, big_r: scalar, extent: vec3):
+        """The centre ``a + t d`` at a contact, kept strictly on the side the sphere came from.
+
+        When the Minkowski radius ``big_r`` is below ``SEPARATION_ULPS`` ulps of the scale of the
+        computation (``|a + t d|``, ``|d|``, the box's size), rounding could put the centre behind
+        a sharp surface, so it is moved out along the unit ``normal`` by that many ulps; any larger
+        radius leaves it bit for bit.
+        """
+        contact = a + t * d
+        lift = SEPARATION * wp.max(wp.max(inf_norm(contact), inf_norm(d)), inf_norm(extent))
+        if big_r < lift:
+            contact = contact + lift * normal
+        return contact
 
     @wp.func
     def sweep_box_world(a: vec3, d: vec3, r: scalar, center: vec3, rotation: mat33,
@@ -141,7 +169,7 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         return best, best_t, best_n
 
     return SimpleNamespace(sweep_box_world=sweep_box_world, nearest_hit=nearest_hit,
-                           nearest_hit_bvh=nearest_hit_bvh)
+                           nearest_hit_bvh=nearest_hit_bvh, contact_centre=contact_centre)
 
 
 @cache
