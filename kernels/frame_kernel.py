@@ -1,4 +1,4 @@
-"""The frame kernel: one thread per sphere advances it by one time step.
+"""The frame kernel: one thread per sphere advances it by one or many time steps.
 
 Per sphere (SPEC "Dynamics of one frame"): gravity by semi-implicit Euler (``v += g dt``), the
 move by the bounce loop, the speed reset from the energy invariant, and the orientation from the
@@ -31,6 +31,12 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
                  lossy: bool, broad_phase: bool):
     """Build the frame kernel for one feature set.
 
+    One thread per sphere advances it by ``frame_count`` frames with its state in registers,
+    writes the state once at the end, and (when ``record_every > 0``) writes every
+    ``record_every``-th frame and the last one into the record arrays. The frames are the same
+    arithmetic in the same order as one launch per frame, so the results are bit-identical
+    whatever the frames per launch.
+
     Args:
         precision_name: ``"float32"`` or ``"float64"``.
         max_bounces: contacts per sphere per frame, compiled in.
@@ -41,6 +47,14 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         lossy: ``energy_retention < 1``.
         broad_phase: find contacts with the BVH ``box_bvh`` (else every box is tried and
             ``box_bvh`` is not read); the results are bit-identical either way.
+
+    Kernel parameters beyond the model, the sphere constants and the state:
+        frame_count: frames this launch advances (>= 0).
+        record_every: record one frame in this many and the launch's last one (0: none).
+        record_position_out, record_orientation_out: (records, N) centres [m] and orientations.
+        record_velocity_out, record_angular_velocity_out: (records, N) true velocity at the
+            recorded frame [m/s] (``v + g dt / 2``) and world angular velocity ``Rot`` [rad/s];
+            written only when the arrays have rows (a (0, N) array skips them).
     """
     p = precision(precision_name)
     scalar, vec3, mat33, quat = p.scalar, p.vec3, p.mat33, p.quat
@@ -56,50 +70,18 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
     ZERO = scalar(0.0)
     RESET_SLACK = scalar(RESET_ULPS * p.eps)
 
-    @variant_kernel
-    def advance_frame(
-        # Model:
-        box_center: wp.array(dtype=vec3),
-        box_rotation: wp.array(dtype=mat33),
-        box_half_extents: wp.array(dtype=vec3),
-        box_radius: wp.array(dtype=scalar),
-        box_extent: wp.array(dtype=vec3),
-        box_bvh: wp.uint64,
-        gravity: vec3,
-        origin: vec3,
-        dt: scalar,
-        friction: scalar,
-        max_rot: scalar,
-        retention: scalar,
-        radius: wp.array(dtype=scalar),
-        mass: wp.array(dtype=scalar),
-        # In:
-        position_in: wp.array(dtype=vec3),
-        velocity_in: wp.array(dtype=vec3),
-        energy_in: wp.array(dtype=scalar),
-        angular_momentum_in: wp.array(dtype=vec3),
-        orientation_in: wp.array(dtype=quat),
-        # Out:
-        position_out: wp.array(dtype=vec3),
-        velocity_out: wp.array(dtype=vec3),
-        energy_out: wp.array(dtype=scalar),
-        angular_momentum_out: wp.array(dtype=vec3),
-        orientation_out: wp.array(dtype=quat),
-        bounce_count_out: wp.array(dtype=wp.int32),
-        capped_count_out: wp.array(dtype=wp.int32),
-    ):
-        i = wp.tid()
-        r = radius[i]
-        m = mass[i]
-        energy = energy_in[i]
-        L = vec3()
-        if wp.static(spin):
-            L = angular_momentum_in[i]
-        v = velocity_in[i] + gravity * dt
+    @wp.func
+    def linear_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
+                     gravity: vec3, origin: vec3, dt: scalar, friction: scalar, max_rot: scalar,
+                     retention: scalar,
+                     box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
+                     box_half_extents: wp.array(dtype=vec3), box_radius: wp.array(dtype=scalar),
+                     box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64):
+        """One frame of the linear (chord) model; returns the state and the frame's counts."""
+        v = v + gravity * dt
         x, v, L, energy, bounces, capped, supported = bounce_path(
-            position_in[i], v, r, m, L, energy, gravity, origin, dt, friction, max_rot,
-            retention, box_center, box_rotation, box_half_extents, box_radius, box_extent,
-            box_bvh)
+            x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention,
+            box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh)
         # The energy is that of the velocity at the frame's end, v + g dt / 2 (the stored v is
         # semi-implicit Euler's step velocity): semi-implicit Euler keeps that energy exactly
         # in free flight, so the reset changes nothing there and only removes drift.
@@ -126,14 +108,93 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
             v = energy_along_gravity(u, energy, m, gravity, x, origin, 1) - half_kick
         else:
             v = energy_along_gravity(u, energy, m, gravity, x, origin, 0) - half_kick
+        if wp.static(spin):
+            rot = rotation_vector(L, inertia(m, r), max_rot)
+            o = integrate_orientation(o, rot, dt)
+        return x, v, L, o, energy, bounces, capped
+
+    @variant_kernel
+    def advance_frames(
+        # Model:
+        box_center: wp.array(dtype=vec3),
+        box_rotation: wp.array(dtype=mat33),
+        box_half_extents: wp.array(dtype=vec3),
+        box_radius: wp.array(dtype=scalar),
+        box_extent: wp.array(dtype=vec3),
+        box_bvh: wp.uint64,
+        gravity: vec3,
+        origin: vec3,
+        dt: scalar,
+        friction: scalar,
+        max_rot: scalar,
+        retention: scalar,
+        radius: wp.array(dtype=scalar),
+        mass: wp.array(dtype=scalar),
+        frame_count: int,
+        record_every: int,
+        # In:
+        position_in: wp.array(dtype=vec3),
+        velocity_in: wp.array(dtype=vec3),
+        energy_in: wp.array(dtype=scalar),
+        angular_momentum_in: wp.array(dtype=vec3),
+        orientation_in: wp.array(dtype=quat),
+        # Out:
+        position_out: wp.array(dtype=vec3),
+        velocity_out: wp.array(dtype=vec3),
+        energy_out: wp.array(dtype=scalar),
+        angular_momentum_out: wp.array(dtype=vec3),
+        orientation_out: wp.array(dtype=quat),
+        bounce_count_out: wp.array(dtype=wp.int32),
+        capped_count_out: wp.array(dtype=wp.int32),
+        record_position_out: wp.array2d(dtype=vec3),
+        record_orientation_out: wp.array2d(dtype=quat),
+        record_velocity_out: wp.array2d(dtype=vec3),
+        record_angular_velocity_out: wp.array2d(dtype=vec3),
+    ):
+        i = wp.tid()
+        r = radius[i]
+        m = mass[i]
+        x = position_in[i]
+        v = velocity_in[i]
+        energy = energy_in[i]
+        L = vec3()
+        o = quat()
+        if wp.static(spin):
+            L = angular_momentum_in[i]
+            o = orientation_in[i]
+        bounces = int(0)
+        capped = int(0)
+        row = int(0)
+        with_motion = record_velocity_out.shape[0] > 0
+        half_kick = gravity * (HALF * dt)
+        for f in range(frame_count):
+            x, v, L, o, energy, b, c = linear_frame(
+                x, v, L, o, energy, r, m, gravity, origin, dt, friction, max_rot, retention,
+                box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh)
+            bounces += b
+            capped += c
+            if record_every > 0:
+                if (f + 1) % record_every == 0 or f + 1 == frame_count:
+                    record_position_out[row, i] = x
+                    if wp.static(spin):
+                        record_orientation_out[row, i] = o
+                    else:
+                        record_orientation_out[row, i] = orientation_in[i]
+                    if with_motion:
+                        record_velocity_out[row, i] = v + half_kick
+                        if wp.static(spin):
+                            record_angular_velocity_out[row, i] = rotation_vector(
+                                L, inertia(m, r), max_rot)
+                        else:
+                            record_angular_velocity_out[row, i] = vec3()
+                    row += 1
         position_out[i] = x
         velocity_out[i] = v
         energy_out[i] = energy
         if wp.static(spin):
             angular_momentum_out[i] = L
-            rot = rotation_vector(L, inertia(m, r), max_rot)
-            orientation_out[i] = integrate_orientation(orientation_in[i], rot, dt)
+            orientation_out[i] = o
         bounce_count_out[i] += bounces
         capped_count_out[i] += capped
 
-    return advance_frame
+    return advance_frames

@@ -245,7 +245,10 @@ def kernel_arguments(kernel, *, model: Model | None = None, spheres: Spheres | N
         if value is None:
             raise KeyError(f"kernel {kernel.key}: no source provides parameter {name!r}")
         if rows is not None and per_sphere and isinstance(value, wp.array):
-            value = value[rows] if value.ndim == 1 else value[:, rows]
+            if value.ndim == 1:
+                value = value[rows]
+            elif value.shape[0] > 0:  # an empty (0, N) output is never indexed: pass it whole
+                value = value[:, rows]
         args.append(value)
     return args
 

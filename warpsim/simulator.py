@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,16 +69,28 @@ class Stats:
         return self.sphere_frames / self.seconds if self.seconds > 0 else float("nan")
 
 
+#: A launch advances about this many sphere-frames (split over the workers): a few tenths of a
+#: second on one CPU core, so that progress is reported and Ctrl-C is honoured promptly, while
+#: the launch overhead stays far below the work (one launch per frame costs about 10 us).
+LAUNCH_SPHERE_FRAMES = 1 << 22
+
+#: Shards smaller than this many spheres are not worth a thread of their own: below it the
+#: launch and thread hand-off cost more than the shard's work at one frame per launch.
+MIN_SHARD_SPHERES = 256
+
+
 class Simulator:
-    """Advances a swarm among a scene's static obstacles, one kernel launch per frame.
+    """Advances a swarm among a scene's static obstacles, many frames per kernel launch.
 
     Each frame, per sphere: ``v += g dt`` (semi-implicit Euler), the multi-bounce move of
     ``v dt`` (contacts reflect; friction spins; ``energy_retention`` losses), the speed reset
     from the energy invariant (``scene.energy_correction``), and the orientation step from the
     rotation vector. The kernel is built for what the scene needs: no spin code when friction is
     0 and no sphere spins, no loss code when ``energy_retention = 1``, no reset when the
-    correction is off. State stays on the device between frames; :meth:`run` copies out only the
-    frames it records. Results are bit-identical run after run on the same device.
+    correction is off. A launch advances each sphere through many frames with its state in
+    registers (spheres never interact), writing the recorded frames straight from the kernel;
+    the state stays on the device between launches. Results are bit-identical run after run on
+    the same device, whatever the frames per launch and the number of workers.
 
     Args:
         scene: obstacles and physics settings.
@@ -89,6 +103,10 @@ class Simulator:
             ``"bvh"`` queries a BVH over the boxes' bounds (built once, here), ``"auto"`` takes
             the BVH from ``warpsim.device.BVH_MIN_BOXES`` boxes on. Bit-identical results;
             :attr:`broad_phase` says which one runs.
+        workers: on the CPU device, the swarm is split into this many contiguous shards, each
+            launched from its own thread (Warp runs one CPU launch on one core and releases the
+            GIL during it); None uses every core of the machine, 1 one core. Results are
+            bit-identical whatever the number. On a CUDA device one launch covers the swarm.
 
     Attributes:
         broad_phase: ``"bvh"`` or ``"brute"``, the broad phase compiled into the kernel.
@@ -99,7 +117,7 @@ class Simulator:
 
     def __init__(self, scene: Scene, swarm: Swarm, dt: float | None = None,
                  max_bounces: int | None = None, device=None, precision: str = "float32",
-                 broad_phase: str = "auto"):
+                 broad_phase: str = "auto", workers: int | None = None):
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be a warpsim.Scene, got {type(scene).__name__}")
         if not isinstance(swarm, Swarm):
@@ -111,6 +129,8 @@ class Simulator:
         self.precision = check.precision(precision)
         self.broad_phase = "bvh" if use_bvh(broad_phase, len(scene.boxes)) else "brute"
         self.device = resolve_device(device)
+        self.workers = _workers(workers, self.device, len(swarm))
+        """Threads that launch the frame kernel, each on a contiguous shard of the swarm."""
         self.spin = bool(scene.friction > 0.0 or np.any(swarm.angular_momentum != 0.0))
         self.energy_origin = _energy_origin(scene, swarm)
         self.frame = 0
@@ -123,6 +143,9 @@ class Simulator:
                                     scene.energy_correction, scene.energy_retention < 1.0,
                                     self.broad_phase == "bvh")
         self._upload(swarm)
+        self._shards = _shards(self._n, self.workers)
+        self._executor = None
+        self._no_records = self._records(0, False)
 
     # -- set-up -------------------------------------------------------------------------------
 
@@ -155,13 +178,23 @@ class Simulator:
                          "capped_count_out": wp.zeros(self._n, dtype=wp.int32, device=dev)}
         """Per-sphere counters the kernel adds to (contacts taken, sphere-frames capped)."""
         self._initial_energy = energy
-        # the two argument lists (state_0 -> state_1 and back), built once by name
-        self._launch_args = [self._arguments(self.state_0, self.state_1),
-                             self._arguments(self.state_1, self.state_0)]
 
-    def _arguments(self, state_in: DeviceState, state_out: DeviceState) -> list:
+    def _arguments(self, state_in: DeviceState, state_out: DeviceState, rows: slice,
+                   values: dict, records: dict) -> list:
         return kernel_arguments(self._kernel, model=self.model, spheres=self.spheres,
-                                state_in=state_in, state_out=state_out, outputs=self.counters)
+                                state_in=state_in, state_out=state_out,
+                                outputs={**self.counters, **records}, values=values, rows=rows)
+
+    def _records(self, rows: int, motion: bool) -> dict:
+        """Device arrays the kernel writes ``rows`` recorded frames into, (rows, N) each; the
+        velocity pair has no rows unless ``motion``."""
+        p, dev, n = self._p, self.device, self._n
+        motion_rows = rows if motion else 0
+        return {"record_position_out": wp.empty((rows, n), dtype=p.vec3, device=dev),
+                "record_orientation_out": wp.empty((rows, n), dtype=p.quat, device=dev),
+                "record_velocity_out": wp.empty((motion_rows, n), dtype=p.vec3, device=dev),
+                "record_angular_velocity_out": wp.empty((motion_rows, n), dtype=p.vec3,
+                                                        device=dev)}
 
     # -- stepping -----------------------------------------------------------------------------
 
@@ -175,54 +208,127 @@ class Simulator:
         wp.load_module(self._kernel.module, device=self.device)
         return time.perf_counter() - start
 
-    def _launch(self) -> None:
-        wp.launch(self._kernel, dim=self._n, device=self.device, inputs=self._launch_args[0])
+    def _launch(self, frames: int, every: int = 0, records: dict | None = None) -> None:
+        """Advance ``frames`` frames in one launch per shard (all shards at once); with
+        ``every > 0`` the kernel writes its recorded frames into ``records``."""
+        if records is None:
+            records = self._no_records
+        values = {"frame_count": int(frames), "record_every": int(every)}
+        shards = self._shards if len(self._shards) > 1 else [None]
+        calls = [self._arguments(self.state_0, self.state_1, rows, values, records)
+                 for rows in shards]
+        if len(calls) == 1:
+            wp.launch(self._kernel, dim=self._n, device=self.device, inputs=calls[0])
+        else:
+            pool = self._pool()
+            futures = [pool.submit(wp.launch, self._kernel, dim=rows.stop - rows.start,
+                                   device=self.device, inputs=args)
+                       for rows, args in zip(self._shards, calls, strict=True)]
+            for future in futures:
+                future.result()
         self.state_0, self.state_1 = self.state_1, self.state_0
-        self._launch_args.reverse()
-        self.frame += 1
+        self.frame += frames
+
+    def _pool(self) -> ThreadPoolExecutor:
+        if self._executor is None:
+            self._executor = ThreadPoolExecutor(max_workers=len(self._shards),
+                                                thread_name_prefix="warpsim-shard")
+        return self._executor
+
+    def _frames_per_launch(self, every: int = 1) -> int:
+        """Frames of one launch: about ``LAUNCH_SPHERE_FRAMES`` sphere-frames, so that a long
+        run still reports progress and stops promptly on Ctrl-C; a multiple of ``every``."""
+        per_launch = max(1, LAUNCH_SPHERE_FRAMES // max(self._n, 1))
+        return max(every, per_launch // every * every)
 
     def step(self, frames: int = 1) -> None:
         """Advance ``frames`` frames on the device (no copy to the host)."""
         frames = check.positive_int("frames", frames)
         start = time.perf_counter()
-        for _ in range(frames):
-            self._launch()
+        done = 0
+        chunk = self._frames_per_launch()
+        while done < frames:
+            todo = min(chunk, frames - done)
+            self._launch(todo)
+            done += todo
         wp.synchronize_device(self.device)
         self._seconds += time.perf_counter() - start
 
-    def run(self, frames: int, every: int = 1, progress: bool = False) -> Trajectory:
+    def run(self, frames: int, every: int = 1, progress: bool = False,
+            velocities: bool = False) -> Trajectory:
         """Advance ``frames`` frames, recording the current state and every ``every``-th frame.
+
+        The kernel writes the recorded frames itself; one launch covers many of them.
 
         Args:
             frames: frames to advance, >= 1.
             every: record one frame in ``every``, >= 1 (the last frame is always recorded).
-            progress: draw a progress bar on standard error.
+            progress: draw a progress bar (tqdm) on standard error.
+            velocities: also record each sphere's true velocity [m/s] and angular velocity
+                [rad/s] at the recorded frames (``Trajectory.velocity`` and
+                ``angular_velocity``).
 
         Returns:
             :class:`Trajectory` with the frame numbers since the start of the simulation.
         """
         frames = check.positive_int("frames", frames)
         every = check.positive_int("every", every)
-        stops = sorted(set(range(every, frames + 1, every)) | {frames})
-        records = [self._record()]
-        bar = _ProgressBar(frames) if progress else None
-        done = 0
-        for stop in stops:
-            self.step(stop - done)
-            done = stop
-            records.append(self._record())
-            if bar:
-                bar.update(done)
-        if bar:
+        if not isinstance(velocities, bool):
+            raise ValueError(f"velocities must be True or False, got {velocities!r}")
+        stops = list(range(every, frames + 1, every))
+        if not stops or stops[-1] != frames:
+            stops.append(frames)
+        n, count = self._n, len(stops) + 1
+        first = self.frame
+        position = np.empty((count, n, 3), dtype=self._p.np_dtype)
+        orientation = np.empty((count, n, 4), dtype=self._p.np_dtype)
+        velocity = np.empty((count, n, 3), dtype=self._p.np_dtype) if velocities else None
+        angular = np.empty((count, n, 3), dtype=self._p.np_dtype) if velocities else None
+        position[0] = self.state_0.position.numpy()
+        orientation[0] = self.state_0.orientation.numpy()
+        if velocities:
+            velocity[0], angular[0] = self._motion_now()
+        bar = _progress_bar(frames, progress)
+        start = time.perf_counter()
+        row = 1
+        try:
+            per_launch = self._frames_per_launch(every)
+            done = 0
+            while done < frames:
+                todo = min(per_launch, frames - done)
+                rows = -(-todo // every)  # every full interval, and a last partial one
+                records = self._records(rows, velocities)
+                self._launch(todo, every, records)
+                done += todo
+                position[row:row + rows] = records["record_position_out"].numpy()
+                orientation[row:row + rows] = records["record_orientation_out"].numpy()
+                if velocities:
+                    velocity[row:row + rows] = records["record_velocity_out"].numpy()
+                    angular[row:row + rows] = records["record_angular_velocity_out"].numpy()
+                row += rows
+                bar.update(todo)
+        finally:
             bar.close()
-        return Trajectory(frame=np.array([r[0] for r in records], dtype=np.int64), dt=self.dt,
-                          position=np.stack([r[1] for r in records]),
-                          orientation=np.stack([r[2] for r in records]),
-                          radius=self._radius_host.copy())
+            self._seconds += time.perf_counter() - start
+        return Trajectory(frame=np.array([first] + [first + k for k in stops], dtype=np.int64),
+                          dt=self.dt, position=position, orientation=orientation,
+                          radius=self._radius_host.copy(), velocity=velocity,
+                          angular_velocity=angular)
 
-    def _record(self):
-        return (self.frame, self.state_0.position.numpy().copy(),
-                self.state_0.orientation.numpy().copy())
+    def _motion_now(self) -> tuple[np.ndarray, np.ndarray]:
+        """True velocity [m/s] and world angular velocity [rad/s] of the current state."""
+        s = self.state()
+        u = s.velocity + (0.5 * self.dt * self.scene.gravity).astype(s.velocity.dtype)
+        inertia = 0.4 * self.mass * self._radius_host ** 2
+        rot = np.zeros_like(s.angular_momentum)
+        if self.spin:
+            ok = inertia > 0.0
+            rot[ok] = s.angular_momentum[ok] / inertia[ok, None]
+            size = np.linalg.norm(rot, axis=1)
+            limit = self.scene.max_angular_speed
+            over = size > limit
+            rot[over] *= (limit / size[over])[:, None]
+        return u, rot.astype(s.angular_momentum.dtype)
 
     # -- read-out -----------------------------------------------------------------------------
 
@@ -280,30 +386,44 @@ def _energy_origin(scene: Scene, swarm: Swarm) -> np.ndarray:
     return 0.5 * (pts.min(axis=0) + pts.max(axis=0))
 
 
-class _ProgressBar:
-    """A one-line text progress bar on standard error."""
+def _workers(workers, device, n: int) -> int:
+    """The number of CPU threads to launch from (1 on a CUDA device).
 
-    #: Seconds between redraws: a bar drawn every frame would cost more than small frames.
-    REDRAW_S = 0.1
+    An explicit number is kept (at most one sphere per shard); None takes every core the
+    process may use, but no shard below ``MIN_SHARD_SPHERES`` spheres.
+    """
+    if workers is not None:
+        workers = check.positive_int("workers", workers)
+    if not device.is_cpu:
+        return 1
+    if workers is not None:
+        return max(1, min(workers, n))
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not on every platform
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, n // MIN_SHARD_SPHERES))
 
-    def __init__(self, total: int, width: int = 30):
-        self.total = total
-        self.width = width
-        self.start = time.perf_counter()
-        self.drawn = -1.0
 
-    def update(self, done: int) -> None:
-        now = time.perf_counter()
-        if done < self.total and now - self.drawn < self.REDRAW_S:
-            return
-        self.drawn = now
-        filled = int(self.width * done / self.total)
-        elapsed = time.perf_counter() - self.start
-        rate = done / elapsed if elapsed > 0 else 0.0
-        sys.stderr.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] "
-                         f"{done}/{self.total} frames  {rate:,.0f} frames/s")
-        sys.stderr.flush()
+def _shards(n: int, workers: int) -> list[slice]:
+    """``workers`` contiguous, nearly equal slices of ``range(n)``."""
+    bounds = np.linspace(0, n, workers + 1).round().astype(int)
+    return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
+
+
+def _progress_bar(frames: int, enabled: bool):
+    """A tqdm bar over frames on standard error (a no-op object when disabled)."""
+    if not enabled:
+        return _NoBar()
+    from tqdm.auto import tqdm
+
+    return tqdm(total=frames, unit="frame", file=sys.stderr, dynamic_ncols=True,
+                mininterval=0.1)
+
+
+class _NoBar:
+    def update(self, _n: int) -> None:
+        pass
 
     def close(self) -> None:
-        sys.stderr.write("\n")
-        sys.stderr.flush()
+        pass
