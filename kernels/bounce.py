@@ -43,7 +43,7 @@ RESTING_GAP_ULPS = 16.0
 
 @cache
 def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
-                 broad_phase: bool) -> SimpleNamespace:
+                 broad_phase: str) -> SimpleNamespace:
     """Build the bounce loop for one precision and one feature set.
 
     Args:
@@ -52,7 +52,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
         spin: update the angular momentum from contact friction (else ``L`` passes through
             untouched and no spin code is compiled).
         lossy: apply ``energy_retention`` at each bounce (else no loss code is compiled).
-        broad_phase: find each contact with the BVH query (else the loop over all boxes).
+        broad_phase: one of ``nearest.BROAD_PHASES`` (bit-identical results).
 
     Returns:
         Namespace with ``bounce_path``.
@@ -106,7 +106,10 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                     box_center: wp.array(dtype=p.vec3), box_rotation: wp.array(dtype=p.mat33),
                     box_half_extents: wp.array(dtype=p.vec3),
                     box_radius: wp.array(dtype=p.scalar), box_extent: wp.array(dtype=p.vec3),
-                    box_bvh: wp.uint64):
+                    box_bvh: wp.uint64,
+                    grid_lower: vec3, grid_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
+                    grid_cell_start: wp.array(dtype=wp.int32),
+                    grid_cell_boxes: wp.array(dtype=wp.int32)):
         """Move a sphere for one frame among the boxes, bouncing up to ``MAX_BOUNCES`` times.
 
         Args:
@@ -116,7 +119,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
             potential). origin: potential reference point [m]. dt: frame duration [s].
             friction: ``k_f`` [kg/s]. max_rot: ``|Rot|`` clamp [rad/s]. retention: kept
             fraction of kinetic energy per bounce. box_*: the obstacles (see ``nearest``);
-            ``box_bvh``: the BVH over them (read only with ``broad_phase``).
+            ``box_bvh`` and ``grid_*``: the broad phase's data (see ``nearest``).
 
         Returns:
             ``(position, velocity, L, energy, bounces, capped, supported)``: ``bounces`` counts
@@ -130,7 +133,8 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
         done = int(0)
         while done == 0:
             box, t, n = nearest_hit(a, d, r, box_center, box_rotation, box_half_extents,
-                                    box_radius, box_extent, box_bvh)
+                                    box_radius, box_extent, box_bvh, grid_lower, grid_cell,
+                                    grid_dims, grid_margin, grid_cell_start, grid_cell_boxes)
             if box < 0:
                 a = a + d
                 done = 1

@@ -13,14 +13,13 @@ from .variant import variant_kernel
 
 
 @cache
-def collide_kernel(precision_name: str, broad_phase: bool):
+def collide_kernel(precision_name: str, broad_phase: str):
     """The nearest-contact kernel (sheet methods 1 and 2) for one precision and broad phase.
 
     Per sphere: the centre would move from ``A`` to ``B = A + v dt``; the kernel finds the first
     contact over all boxes and writes the SPEC results. Rows without a contact hold ``box = -1``,
     ``t = 1``, ``position = new_position = B``, ``normal = 0`` and ``new_velocity = v``.
-    With ``broad_phase`` the candidates come from the BVH ``box_bvh`` (bit-identical results),
-    else every box is tried and ``box_bvh`` is not read.
+    ``broad_phase`` is one of ``nearest.BROAD_PHASES`` (bit-identical results).
     """
     p = precision(precision_name)
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
@@ -38,6 +37,12 @@ def collide_kernel(precision_name: str, broad_phase: bool):
         box_radius: wp.array(dtype=scalar),
         box_extent: wp.array(dtype=vec3),
         box_bvh: wp.uint64,
+        grid_lower: vec3,
+        grid_cell: vec3,
+        grid_dims: wp.vec3i,
+        grid_margin: scalar,
+        grid_cell_start: wp.array(dtype=wp.int32),
+        grid_cell_boxes: wp.array(dtype=wp.int32),
         dt: scalar,
         # In:
         position_in: wp.array(dtype=vec3),
@@ -56,7 +61,9 @@ def collide_kernel(precision_name: str, broad_phase: bool):
         v = velocity_in[i]
         d = v * dt
         box, t, n = nearest_hit(a, d, radius[i], box_center, box_rotation,
-                                box_half_extents, box_radius, box_extent, box_bvh)
+                                box_half_extents, box_radius, box_extent, box_bvh,
+                                grid_lower, grid_cell, grid_dims, grid_margin,
+                                grid_cell_start, grid_cell_boxes)
         contact = a + t * d
         new_v = v
         new_p = contact
@@ -79,7 +86,7 @@ def collide_kernel(precision_name: str, broad_phase: bool):
 
 @cache
 def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool,
-                  broad_phase: bool):
+                  broad_phase: str):
     """The multi-bounce kernel (sheet method 3) for one feature set, without gravity.
 
     Per sphere: the bounce loop over the frame's straight-line displacement ``v dt``. Outputs the
@@ -102,6 +109,12 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         box_radius: wp.array(dtype=scalar),
         box_extent: wp.array(dtype=vec3),
         box_bvh: wp.uint64,
+        grid_lower: vec3,
+        grid_cell: vec3,
+        grid_dims: wp.vec3i,
+        grid_margin: scalar,
+        grid_cell_start: wp.array(dtype=wp.int32),
+        grid_cell_boxes: wp.array(dtype=wp.int32),
         dt: scalar,
         friction: scalar,
         max_rot: scalar,
@@ -126,7 +139,8 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         x, v_new, L, energy, bounces, capped, supported = bounce_path(
             position_in[i], v, radius[i], m, angular_momentum_in[i], kinetic_energy(m, v),
             zero, zero, dt, friction, max_rot, retention,
-            box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh)
+            box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
+            grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes)
         bounces_out[i] = bounces
         capped_out[i] = capped
         position_out[i] = x

@@ -28,7 +28,7 @@ from .variant import variant_kernel
 
 @cache
 def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_correction: bool,
-                 lossy: bool, broad_phase: bool):
+                 lossy: bool, broad_phase: str):
     """Build the frame kernel for one feature set.
 
     One thread per sphere advances it by ``frame_count`` frames with its state in registers,
@@ -45,8 +45,8 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         energy_correction: reset ``|v|`` from the energy after the move; without it the speed
             is only ever lowered to the energy bound, so energy is never gained either way.
         lossy: ``energy_retention < 1``.
-        broad_phase: find contacts with the BVH ``box_bvh`` (else every box is tried and
-            ``box_bvh`` is not read); the results are bit-identical either way.
+        broad_phase: how each sphere finds its candidate boxes, one of
+            ``nearest.BROAD_PHASES``; the results are bit-identical whichever it is.
 
     Kernel parameters beyond the model, the sphere constants and the state:
         frame_count: frames this launch advances (>= 0).
@@ -76,12 +76,16 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
                      retention: scalar,
                      box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
                      box_half_extents: wp.array(dtype=vec3), box_radius: wp.array(dtype=scalar),
-                     box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64):
+                     box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64,
+                     grid_lower: vec3, grid_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
+                     grid_cell_start: wp.array(dtype=wp.int32),
+                     grid_cell_boxes: wp.array(dtype=wp.int32)):
         """One frame of the linear (chord) model; returns the state and the frame's counts."""
         v = v + gravity * dt
         x, v, L, energy, bounces, capped, supported = bounce_path(
             x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention,
-            box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh)
+            box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
+            grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes)
         # The energy is that of the velocity at the frame's end, v + g dt / 2 (the stored v is
         # semi-implicit Euler's step velocity): semi-implicit Euler keeps that energy exactly
         # in free flight, so the reset changes nothing there and only removes drift.
@@ -122,6 +126,12 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         box_radius: wp.array(dtype=scalar),
         box_extent: wp.array(dtype=vec3),
         box_bvh: wp.uint64,
+        grid_lower: vec3,
+        grid_cell: vec3,
+        grid_dims: wp.vec3i,
+        grid_margin: scalar,
+        grid_cell_start: wp.array(dtype=wp.int32),
+        grid_cell_boxes: wp.array(dtype=wp.int32),
         gravity: vec3,
         origin: vec3,
         dt: scalar,
@@ -170,7 +180,8 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         for f in range(frame_count):
             x, v, L, o, energy, b, c = linear_frame(
                 x, v, L, o, energy, r, m, gravity, origin, dt, friction, max_rot, retention,
-                box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh)
+                box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
+                grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes)
             bounces += b
             capped += c
             if record_every > 0:

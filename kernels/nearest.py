@@ -172,36 +172,141 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
                            nearest_hit_bvh=nearest_hit_bvh, contact_centre=contact_centre)
 
 
+#: The broad phases a kernel can be built with (see :func:`model_nearest_hit`).
+BROAD_PHASES = ("brute", "bvh", "grid", "grid-bvh")
+
+
 @cache
-def model_nearest_hit(p: Precision, broad_phase: bool):
+def grid_funcs(p: Precision) -> SimpleNamespace:
+    """Build the uniform-grid candidate query for one precision.
+
+    The grid covers the scene's bounds with cells of size ``grid_cell``; cell ``c`` lists, in
+    ascending order, every box whose reject bounds (as the BVH's: ``center +- extent (1 +
+    REJECT_SLACK)``, padded) meet the cell grown by ``grid_margin`` on every side. A segment whose
+    query box (its world bounding box grown by ``r (1 + REJECT_SLACK)``, padded as the BVH query)
+    lies inside the grown cell of its start point can only pass the per-box reject of a listed
+    box, so the list replaces the loop over all boxes; a segment that does not fit (fast, or
+    outside the grid) falls back to the broad phase given. Ties go to the lower index as in the
+    brute force: the results are bit-identical.
+
+    Returns:
+        Namespace with ``grid_fits`` and ``nearest_hit_cell``.
+    """
+    scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
+    sweep_box_world = nearest_funcs(p).sweep_box_world
+    ZERO = scalar(0.0)
+    ONE = scalar(1.0)
+    SLACK = scalar(1.0 + REJECT_SLACK)
+    PAD_REL = scalar(BOUNDS_PAD_REL)
+    PAD_ABS = scalar(BOUNDS_PAD_ABS)
+
+    @wp.func
+    def grid_fits(a: vec3, d: vec3, r: scalar, grid_lower: vec3, grid_cell: vec3,
+                  grid_dims: wp.vec3i, grid_margin: scalar):
+        """``(fits, cell)``: whether the segment's padded query box lies in the grown cell of
+        its start point, and that cell's linear index (x fastest)."""
+        fits = int(1)
+        index = int(0)
+        stride = int(1)
+        b = a + d
+        grow = r * SLACK
+        for i in range(3):
+            c = int(wp.floor((a[i] - grid_lower[i]) / grid_cell[i]))
+            if c < 0 or c >= grid_dims[i]:
+                fits = 0
+            else:
+                lo = wp.min(a[i], b[i]) - grow
+                hi = wp.max(a[i], b[i]) + grow
+                cell_lo = grid_lower[i] + scalar(c) * grid_cell[i] - grid_margin
+                cell_hi = cell_lo + grid_cell[i] + grid_margin + grid_margin
+                pad = PAD_REL * wp.max(wp.max(wp.abs(lo), wp.abs(hi)),
+                                       wp.max(wp.abs(cell_lo), wp.abs(cell_hi))) + PAD_ABS
+                if lo - pad < cell_lo + pad or hi + pad > cell_hi - pad:
+                    fits = 0
+                index += c * stride
+                stride *= grid_dims[i]
+        return fits, index
+
+    @wp.func
+    def nearest_hit_cell(a: vec3, d: vec3, r: scalar, cell: int,
+                         grid_cell_start: wp.array(dtype=wp.int32),
+                         grid_cell_boxes: wp.array(dtype=wp.int32),
+                         box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
+                         box_half_extents: wp.array(dtype=vec3),
+                         box_radius: wp.array(dtype=scalar), box_extent: wp.array(dtype=vec3)):
+        """:func:`nearest_hit` over the boxes one cell lists (ascending, so ties keep the lower
+        index)."""
+        best = int(-1)
+        best_t = ONE
+        best_n = vec3(ZERO, ZERO, ZERO)
+        for j in range(grid_cell_start[cell], grid_cell_start[cell + 1]):
+            k = grid_cell_boxes[j]
+            hit, t, normal = sweep_box_world(a, d, r, box_center[k], box_rotation[k],
+                                             box_half_extents[k], box_radius[k], box_extent[k])
+            if hit == 1 and (best < 0 or t < best_t):
+                best = k
+                best_t = t
+                best_n = normal
+        return best, best_t, best_n
+
+    return SimpleNamespace(grid_fits=grid_fits, nearest_hit_cell=nearest_hit_cell)
+
+
+@cache
+def model_nearest_hit(p: Precision, broad_phase: str):
     """The nearest-hit ``@wp.func`` the kernels call, with the kernels' ``# Model`` arguments.
 
     Args:
         p: precision.
-        broad_phase: compile the BVH query (:func:`nearest_hit_bvh`, ``box_bvh`` read) instead
-            of the loop over all boxes (:func:`nearest_hit`, ``box_bvh`` unused).
+        broad_phase: how candidates are found, compiled in (one of ``BROAD_PHASES``):
+            ``"brute"`` every box (:func:`nearest_hit`); ``"bvh"`` the BVH query
+            (:func:`nearest_hit_bvh`, ``box_bvh`` read); ``"grid"`` the uniform grid's cell list
+            with every box as the fallback; ``"grid-bvh"`` the grid with the BVH as the
+            fallback. Arrays a variant does not use are passed but never read. Every variant
+            gives bit-identical results.
 
     Returns:
         ``nearest_hit_model(a, d, r, box_center, box_rotation, box_half_extents, box_radius,
-        box_extent, box_bvh) -> (box, t, normal)``, the contract of :func:`nearest_hit`.
+        box_extent, box_bvh, grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start,
+        grid_cell_boxes) -> (box, t, normal)``, the contract of :func:`nearest_hit`.
     """
+    if broad_phase not in BROAD_PHASES:
+        raise ValueError(f"broad_phase must be one of {BROAD_PHASES}, got {broad_phase!r}")
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     funcs = nearest_funcs(p)
     nearest_hit, nearest_hit_bvh = funcs.nearest_hit, funcs.nearest_hit_bvh
+    grid = grid_funcs(p)
+    grid_fits, nearest_hit_cell = grid.grid_fits, grid.nearest_hit_cell
+    use_grid = broad_phase in ("grid", "grid-bvh")
+    fallback_bvh = broad_phase in ("bvh", "grid-bvh")
 
     @wp.func
     def nearest_hit_model(a: vec3, d: vec3, r: scalar,
                           box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
                           box_half_extents: wp.array(dtype=vec3),
                           box_radius: wp.array(dtype=scalar), box_extent: wp.array(dtype=vec3),
-                          box_bvh: wp.uint64):
+                          box_bvh: wp.uint64, grid_lower: vec3, grid_cell: vec3,
+                          grid_dims: wp.vec3i, grid_margin: scalar,
+                          grid_cell_start: wp.array(dtype=wp.int32),
+                          grid_cell_boxes: wp.array(dtype=wp.int32)):
         """First contact of the sphere over the boxes, by the broad phase compiled in."""
-        if wp.static(broad_phase):
-            box, t, normal = nearest_hit_bvh(a, d, r, box_bvh, box_center, box_rotation,
+        box = int(-1)
+        t = scalar(1.0)
+        normal = vec3()
+        fits = int(0)
+        if wp.static(use_grid):
+            fits, cell = grid_fits(a, d, r, grid_lower, grid_cell, grid_dims, grid_margin)
+            if fits == 1:
+                box, t, normal = nearest_hit_cell(a, d, r, cell, grid_cell_start,
+                                                  grid_cell_boxes, box_center, box_rotation,
+                                                  box_half_extents, box_radius, box_extent)
+        if fits == 0:
+            if wp.static(fallback_bvh):
+                box, t, normal = nearest_hit_bvh(a, d, r, box_bvh, box_center, box_rotation,
+                                                 box_half_extents, box_radius, box_extent)
+            else:
+                box, t, normal = nearest_hit(a, d, r, box_center, box_rotation,
                                              box_half_extents, box_radius, box_extent)
-        else:
-            box, t, normal = nearest_hit(a, d, r, box_center, box_rotation, box_half_extents,
-                                         box_radius, box_extent)
         return box, t, normal
 
     return nearest_hit_model

@@ -119,20 +119,22 @@ def test_simulator_galton_bvh_is_bit_identical():
     assert len(scene.boxes) >= BVH_MIN_BOXES
     swarm = scene.spawn(n=1000, seed=1)
     sims = {bp: ws.Simulator(scene, swarm, device="cpu", broad_phase=bp)
-            for bp in ("brute", "bvh", "auto")}
-    assert {bp: s.broad_phase for bp, s in sims.items()} == {
-        "brute": "brute", "bvh": "bvh", "auto": "bvh"}
+            for bp in ("brute", "bvh", "grid", "auto")}
+    assert {bp: s.broad_phase for bp, s in sims.items() if bp != "auto"} == {
+        "brute": "brute", "bvh": "bvh", "grid": "grid-bvh"}
     for sim in sims.values():
         sim.step(30)
     brute, bvh = sims["brute"], sims["bvh"]
     assert_same(brute.state(), bvh.state(), STATE_FIELDS)
+    assert_same(brute.state(), sims["grid"].state(), STATE_FIELDS)
     assert_same(brute.state(), sims["auto"].state(), STATE_FIELDS)
     assert brute.stats.bounces == bvh.stats.bounces > 0
     assert brute.stats.capped == bvh.stats.capped
 
 
 def test_auto_keeps_brute_force_for_few_boxes():
-    boxes = ws.RoundedBoxes(np.zeros((BVH_MIN_BOXES - 1, 3)), np.full((BVH_MIN_BOXES - 1, 3), 0.1))
+    """Boxes piled in one place: a grid cell near them lists them all, so it buys nothing."""
+    boxes = ws.RoundedBoxes(np.zeros((3, 3)), np.full((3, 3), 0.1))
     swarm = ws.Swarm([[0.0, 1.0, 0.0]], [[0.0, 0.0, 0.0]], 0.05)
     assert ws.Simulator(ws.Scene(boxes), swarm, device="cpu").broad_phase == "brute"
 

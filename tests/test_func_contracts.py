@@ -47,7 +47,7 @@ def capsule_kernel(name: str):
             sphere: wp.array(dtype=wp.int32), hit_out: wp.array(dtype=wp.int32),
             t_out: wp.array(dtype=p.scalar), normal_out: wp.array(dtype=p.vec3)):
         i = wp.tid()
-        hit = int(0)
+        hit = int(0)  # noqa: UP018 (a dynamic Warp variable, not a constant)
         t = p.scalar(0.0)
         n = p.vec3()
         if sphere[i] == 1:

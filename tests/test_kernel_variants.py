@@ -12,6 +12,7 @@ import pytest
 import warpsim as ws
 from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
 from warpsim.kernels.frame_kernel import frame_kernel
+from warpsim.kernels.nearest import BROAD_PHASES
 from warpsim.kernels.variant import KERNEL_OPTIONS
 from warpsim.model import DeviceState, Model, Spheres, kernel_arguments, parameter_names
 
@@ -22,13 +23,14 @@ FLAGS = (False, True)
 def all_kernels():
     """(label, kernel) for every variant of every factory (two values of max_bounces)."""
     out = []
-    for prec, bvh in itertools.product(PRECISIONS, FLAGS):
-        out.append((f"collide/{prec}/bvh={bvh}", collide_kernel(prec, bvh)))
-    for prec, cap, spin, lossy, bvh in itertools.product(PRECISIONS, (1, 8), FLAGS, FLAGS, FLAGS):
+    for prec, bvh in itertools.product(PRECISIONS, BROAD_PHASES):
+        out.append((f"collide/{prec}/{bvh}", collide_kernel(prec, bvh)))
+    for prec, cap, spin, lossy, bvh in itertools.product(PRECISIONS, (1, 8), FLAGS, FLAGS,
+                                                         BROAD_PHASES):
         out.append((f"bounce/{prec}/{cap}/{spin}/{lossy}/{bvh}",
                     bounce_kernel(prec, cap, spin, lossy, bvh)))
     for prec, cap, spin, corr, lossy, bvh in itertools.product(PRECISIONS, (1, 8), FLAGS, FLAGS,
-                                                               FLAGS, FLAGS):
+                                                               FLAGS, BROAD_PHASES):
         out.append((f"frame/{prec}/{cap}/{spin}/{corr}/{lossy}/{bvh}",
                     frame_kernel(prec, cap, spin, corr, lossy, bvh)))
     return out
@@ -56,7 +58,11 @@ COLLIDE_OUTPUTS = {"box_out", "t_out", "contact_out", "normal_out", "new_positio
                    "new_velocity_out"}
 BOUNCE_OUTPUTS = {"bounces_out", "capped_out", "position_out", "velocity_out",
                   "angular_momentum_out"}
-FRAME_COUNTERS = {"bounce_count_out", "capped_count_out"}
+FRAME_COUNTERS = {"bounce_count_out", "capped_count_out", "record_position_out",
+                  "record_orientation_out", "record_velocity_out",
+                  "record_angular_velocity_out"}
+#: Plain per-launch values (the launch helper's ``values``).
+LAUNCH_VALUES = {"frame_count", "record_every"}
 
 
 @pytest.mark.parametrize("label,kernel", KERNELS, ids=[k[0] for k in KERNELS])
@@ -71,7 +77,7 @@ def test_parameter_names_are_fields(label, kernel):
         elif name.endswith("_out"):
             assert name[:-4] in state_fields() or name in outputs, (label, name)
         else:
-            assert name in model_fields() | sphere_fields, (label, name)
+            assert name in model_fields() | sphere_fields | LAUNCH_VALUES, (label, name)
 
 
 def test_every_simulator_argument_is_the_named_array():
@@ -81,15 +87,20 @@ def test_every_simulator_argument_is_the_named_array():
     swarm = ws.Swarm(position=[[0, 1, 0], [3, 1, 0]], velocity=[[1, 0, 0], [0, 1, 0]],
                      radius=0.1)
     sim = ws.Simulator(ws.Scene(boxes, friction=0.1), swarm, device="cpu")
+    records = sim._records(2, True)
+    values = {"frame_count": 3, "record_every": 2}
     args = kernel_arguments(sim._kernel, model=sim.model, spheres=sim.spheres,
-                            state_in=sim.state_0, state_out=sim.state_1, outputs=sim.counters)
+                            state_in=sim.state_0, state_out=sim.state_1,
+                            outputs={**sim.counters, **records}, values=values)
     for name, value in zip(parameter_names(sim._kernel), args, strict=True):
         if name.endswith("_in"):
             assert value is getattr(sim.state_0, name[:-3])
         elif name.endswith("_out") and name[:-4] in state_fields():
             assert value is getattr(sim.state_1, name[:-4])
         elif name.endswith("_out"):
-            assert value is sim.counters[name]
+            assert value is {**sim.counters, **records}[name]
+        elif name in LAUNCH_VALUES:
+            assert value == values[name]
         elif name in model_fields():
             assert value is getattr(sim.model, name) or value == getattr(sim.model, name)
         else:
@@ -97,7 +108,7 @@ def test_every_simulator_argument_is_the_named_array():
 
 
 def test_missing_or_ambiguous_source_is_an_error():
-    kernel = collide_kernel("float32", False)
+    kernel = collide_kernel("float32", "brute")
     with pytest.raises(KeyError, match="no source provides parameter 'box_center'"):
         kernel_arguments(kernel, state_in={}, outputs={})
     sim_boxes = ws.RoundedBoxes(center=[[0, 0, 0]], half_extents=[[1, 1, 1]])

@@ -16,7 +16,9 @@ import warpsim
 from warpsim.emitter import Emitter
 from warpsim.obstacles import RoundedBoxes, quat_to_matrix
 from warpsim.scene import Scene
-from warpsim.scene_files import SceneFileError, euler_deg_to_quat, list_scenes, load_scene
+from warpsim.scene_files import SceneFileError, euler_deg_to_quat, list_scenes
+
+load_scene = Scene.load
 
 BUNDLED = ("galton", "pinball", "room", "spin", "staircase", "thin-walls", "wedge")
 
@@ -156,7 +158,8 @@ def test_scene_by_path_uses_documented_defaults(tmp_path):
     e = scene.emitter
     assert (e.half_extents, e.radius, e.mass) == ((0.5, 0.5, 0.5), (0.05, 0.05), (1.0, 1.0))
     assert (e.velocity, e.velocity_jitter, e.speed) == ((0.0,) * 3, (0.0,) * 3, None)
-    assert (e.seed, e.cone_deg, e.angular_momentum) == (0, 180.0, (0.0,) * 3)
+    assert (e.seed, e.angular_momentum) == (0, (0.0,) * 3)
+    assert (e.direction, e.cone_deg) == (None, None)  # they shape the speed term only
 
 
 def test_every_setting_is_read(tmp_path):
@@ -194,70 +197,116 @@ def _replace_box(index: int, extra: str, half_extents: str = "[0.5, 0.5, 0.5]") 
     return "[[box]]\n".join(blocks)
 
 
+GRID = ("[[box_grid]]\norigin = [0.0, 0.0, 0.0]\ncount = [2, 2, 1]\nspacing = [1.0, 1.0, 1.0]\n"
+        "half_extents = [0.1, 0.1, 0.1]\n")
+
+# (name, file text, the whole message after "<path>: ")
 ERROR_CASES = [
     ("unknown key with suggestion", MINIMAL.replace("[[box]]\ncenter = [0.0, 0.0, 3.0]",
                                                     "[[box]]\ncentre = [0.0, 0.0, 3.0]"),
-     "scene.toml: unknown key 'centre' in box[3]; did you mean 'center'?"),
+     "unknown key 'centre' in box[3]; did you mean 'center'?"),
     ("negative half extent", _replace_box(2, "", "[0.5, -0.1, 0.5]"),
-     "scene.toml: box[2].half_extents[1] must be >= 0, got -0.1"),
+     "box[2].half_extents[1] must be >= 0, got -0.1"),
     ("zero quaternion", _replace_box(2, "rotation = [0.0, 0.0, 0.0, 0.0]"),
-     "scene.toml: box[2].rotation must be a non-zero quaternion"),
+     "box[2].rotation must be a finite non-zero quaternion (x, y, z, w), got (0, 0, 0, 0)"),
+    ("nan quaternion", _replace_box(3, "rotation = [0.0, nan, 0.0, 1.0]"),
+     "box[3].rotation must be a finite non-zero quaternion (x, y, z, w), got (0, nan, 0, 1)"),
     ("short quaternion", _replace_box(1, "rotation = [0.0, 0.0, 1.0]"),
-     "scene.toml: box[1].rotation must be a quaternion [x, y, z, w]"),
+     "box[1].rotation must be a quaternion (x, y, z, w), got shape (3,)"),
     ("rotation and rotation_deg", _replace_box(1, "rotation = [0.0, 0.0, 0.0, 1.0]\n"
                                                   "rotation_deg = [0.0, 0.0, 90.0]"),
-     "scene.toml: box[1]: give either rotation (quaternion) or rotation_deg"),
+     "box[1]: give either rotation (quaternion) or rotation_deg (Euler angles), not both"),
+    ("string in rotation_deg", _replace_box(2, 'rotation_deg = [0.0, "90", 0.0]'),
+     "box[2].rotation_deg[1] must be a number, got '90'"),
     ("negative rounding radius", _replace_box(3, "radius = -0.5"),
-     "scene.toml: box[3].radius must be >= 0, got -0.5"),
+     "box[3].radius must be >= 0, got -0.5"),
+    ("string radius", _replace_box(3, 'radius = "0.1"'),
+     "box[3].radius must be a number, got '0.1'"),
     ("infinite centre", MINIMAL.replace("[3.0, 0.0, 0.0]", "[inf, 0.0, 0.0]"),
-     "scene.toml: box[1].center must be finite"),
+     "box[1].center must be finite, got (inf, 0, 0)"),
     ("boolean as number", _replace_box(1, "", "[0.5, true, 0.5]"),
-     "scene.toml: box[1].half_extents must be a number or a list of numbers"),
+     "box[1].half_extents[1] must be a number, got True"),
+    ("integer too large for a float", _replace_box(1, "", "[0.5, 0.5, 0.5]").replace(
+        "[3.0, 0.0, 0.0]", "[3.0, 0.0, " + "9" * 400 + "]"),
+     "box[1].center must be a number a float64 can hold, got [3.0, 0.0, " + "9" * 46 + "..."),
     ("missing centre", MINIMAL.replace("center = [3.0, 0.0, 0.0]\n", ""),
-     "scene.toml: box[1].center is required"),
+     "box[1].center is required"),
     ("single [box] table", "[box]\ncenter = [0.0, 0.0, 0.0]\nhalf_extents = [1.0, 1.0, 1.0]\n"
                            "[emitter]\ncount = 1\n",
-     "scene.toml: box must be written [[box]] (an array of tables), not [box]"),
+     "box must be written [[box]] (an array of tables), not [box]"),
     ("no obstacles", "[emitter]\ncount = 1\n",
-     "scene.toml: no obstacles: add at least one [[box]] or [[box_grid]] table"),
+     "no obstacles: add at least one [[box]] or [[box_grid]] table"),
     ("missing emitter", MINIMAL.split("[emitter]")[0],
-     "scene.toml: missing [emitter] table"),
-    ("missing emitter count", MINIMAL.replace("count = 5\n", ""),
-     "scene.toml: emitter.count is required"),
+     "missing [emitter] table (its count is required)"),
+    ("missing emitter count", MINIMAL.replace("count = 5\n", ""), "emitter.count is required"),
     ("unknown emitter key", MINIMAL.replace("count = 5", "count = 5\nvelocity_spread = 1.0"),
-     "scene.toml: unknown key 'velocity_spread' in [emitter]; did you mean 'velocity'?"),
+     "unknown key 'velocity_spread' in [emitter]; did you mean 'velocity'?"),
     ("emitter radius range reversed", MINIMAL.replace("count = 5", "count = 5\n"
                                                       "radius = [0.2, 0.1]"),
-     "scene.toml: emitter.radius must be a scalar or [min, max] with min <= max"),
+     "emitter.radius must be a scalar or [min, max] with min <= max, got [0.2, 0.1]"),
     ("emitter negative radius", MINIMAL.replace("count = 5", "count = 5\nradius = [-0.1, 0.1]"),
-     "scene.toml: emitter.radius[0] must be >= 0, got -0.1"),
+     "emitter.radius[0] must be >= 0, got -0.1"),
+    ("emitter boolean radius", MINIMAL.replace("count = 5", "count = 5\nradius = true"),
+     "emitter.radius must be a number, got True"),
     ("emitter count not an integer", MINIMAL.replace("count = 5", "count = 5.0"),
-     "scene.toml: emitter.count must be an integer"),
+     "emitter.count must be an integer, got 5.0"),
+    ("emitter count of 2**31", MINIMAL.replace("count = 5", "count = 2147483648"),
+     "emitter.count must be <= 2147483647 (integers must be below 2**31), got 2147483648"),
+    ("emitter seed of 2**63", MINIMAL.replace("count = 5", "count = 5\nseed = "
+                                              "9223372036854775807"),
+     "emitter.seed must be <= 2147483647 (integers must be below 2**31), got "
+     "9223372036854775807"),
+    ("emitter direction without speed", MINIMAL.replace("count = 5", "count = 5\n"
+                                                        "direction = [1.0, 0.0, 0.0]"),
+     "emitter.direction only shapes the speed term: give emitter.speed too, or leave "
+     "direction out"),
+    ("emitter cone without speed", MINIMAL.replace("count = 5", "count = 5\ncone_deg = 10.0"),
+     "emitter.cone_deg only shapes the speed term: give emitter.speed too, or leave "
+     "cone_deg out"),
+    ("emitter zero direction", MINIMAL.replace("count = 5", "count = 5\nspeed = 1.0\n"
+                                               "direction = [0.0, 0.0, 0.0]"),
+     "emitter.direction must be a non-zero vector, got (0, 0, 0)"),
     ("physics key at the top level", "friction = 0.3\n" + MINIMAL,
-     "scene.toml: unknown key 'friction' in the top level; it belongs in the [physics] table"),
+     "unknown key 'friction' in the top level; it belongs in the [physics] table"),
     ("unknown table", "[simulaton]\ndt = 0.01\n" + MINIMAL,
-     "scene.toml: unknown key 'simulaton' in the top level; did you mean 'simulation'?"),
-    ("bad dt", "[simulation]\ndt = 0.0\n" + MINIMAL,
-     "scene.toml: simulation.dt must be > 0, got 0"),
+     "unknown key 'simulaton' in the top level; did you mean 'simulation'?"),
+    ("bad dt", "[simulation]\ndt = 0.0\n" + MINIMAL, "simulation.dt must be > 0, got 0"),
+    ("string dt", "[simulation]\ndt = \"0.01\"\n" + MINIMAL,
+     "simulation.dt must be a number, got '0.01'"),
     ("bad frames", "[simulation]\nframes = 2.5\n" + MINIMAL,
-     "scene.toml: simulation.frames must be an integer"),
+     "simulation.frames must be an integer, got 2.5"),
+    ("huge frames", "[simulation]\nframes = 4294967296\n" + MINIMAL,
+     "simulation.frames must be <= 2147483647 (integers must be below 2**31), got 4294967296"),
+    ("max_bounces above the cap", "[simulation]\nmax_bounces = 4294967296\n" + MINIMAL,
+     "simulation.max_bounces must be <= 1024 (the cap is compiled into the kernel's bounce "
+     "loop), got 4294967296"),
+    ("max_bounces of 2**63 - 1", "[simulation]\nmax_bounces = 9223372036854775807\n" + MINIMAL,
+     "simulation.max_bounces must be <= 1024 (the cap is compiled into the kernel's bounce "
+     "loop), got 9223372036854775807"),
     ("bad retention", "[physics]\nenergy_retention = 1.5\n" + MINIMAL,
-     "scene.toml: physics.energy_retention must be <= 1, got 1.5"),
+     "physics.energy_retention must be <= 1, got 1.5"),
     ("energy_correction not a bool", "[physics]\nenergy_correction = 1\n" + MINIMAL,
-     "scene.toml: physics.energy_correction must be true or false"),
+     "physics.energy_correction must be true or false, got 1"),
+    ("gravity with a boolean", "[physics]\ngravity = [0.0, false, 0.0]\n" + MINIMAL,
+     "physics.gravity[1] must be a number, got False"),
     ("unknown physics key", "[physics]\ngravty = [0.0, 0.0, 0.0]\n" + MINIMAL,
-     "scene.toml: unknown key 'gravty' in [physics]; did you mean 'gravity'?"),
-    ("name not a string", "name = 3\n" + MINIMAL, "scene.toml: name must be a string"),
-    ("grid zero count", MINIMAL + "[[box_grid]]\norigin = [0.0, 0.0, 0.0]\ncount = [2, 0, 1]\n"
-                                  "spacing = [1.0, 1.0, 1.0]\nhalf_extents = [0.1, 0.1, 0.1]\n",
-     "scene.toml: box_grid[0].count[1] must be >= 1, got 0"),
-    ("grid bad stagger axis", MINIMAL + "[[box_grid]]\norigin = [0.0, 0.0, 0.0]\n"
-                                        "count = [2, 2, 1]\nspacing = [1.0, 1.0, 1.0]\n"
-                                        "half_extents = [0.1, 0.1, 0.1]\nstagger_axis = 'w'\n",
-     "scene.toml: box_grid[0].stagger_axis must be one of 'x', 'y', 'z'"),
-    ("grid missing spacing", MINIMAL + "[[box_grid]]\norigin = [0.0, 0.0, 0.0]\n"
-                                       "count = [2, 2, 1]\nhalf_extents = [0.1, 0.1, 0.1]\n",
-     "scene.toml: box_grid[0].spacing is required"),
+     "unknown key 'gravty' in [physics]; did you mean 'gravity'?"),
+    ("name not a string", "name = 3\n" + MINIMAL, "name must be a string, got 3"),
+    ("grid zero count", MINIMAL + GRID.replace("[2, 2, 1]", "[2, 0, 1]"),
+     "box_grid[0].count[1] must be >= 1, got 0"),
+    ("grid float count", MINIMAL + GRID.replace("[2, 2, 1]", "[2, 2.0, 1]"),
+     "box_grid[0].count[1] must be an integer, got 2.0"),
+    ("grid huge count", MINIMAL + GRID.replace("[2, 2, 1]", "[2, 99999999999, 1]"),
+     "box_grid[0].count[1] must be <= 2147483647 (integers must be below 2**31), got "
+     "99999999999"),
+    ("grid too many boxes", MINIMAL + GRID.replace("[2, 2, 1]", "[1000, 1000, 1]"),
+     "box_grid[0].count [1000, 1000, 1] makes 1000000 boxes, more than 100000"),
+    ("grid bad stagger axis", MINIMAL + GRID + "stagger_axis = 'w'\n",
+     "box_grid[0].stagger_axis must be one of 'x', 'y', 'z', got 'w'"),
+    ("grid negative half extent", MINIMAL + GRID.replace("[0.1, 0.1, 0.1]", "[0.1, 0.1, -1.0]"),
+     "box_grid[0].half_extents[2] must be >= 0, got -1"),
+    ("grid missing spacing", MINIMAL + GRID.replace("spacing = [1.0, 1.0, 1.0]\n", ""),
+     "box_grid[0].spacing is required"),
 ]
 
 
@@ -267,8 +316,7 @@ def test_bad_file_error_names_file_table_key_and_index(tmp_path, text, message):
     with pytest.raises(SceneFileError) as info:
         load_scene(write(tmp_path, text))
     assert isinstance(info.value, ValueError)
-    assert str(info.value).startswith(str(tmp_path / "scene.toml") + ":")
-    assert message in str(info.value)
+    assert str(info.value) == f"{tmp_path / 'scene.toml'}: {message}"
 
 
 def test_toml_syntax_error_gives_file_and_line(tmp_path):
@@ -426,27 +474,127 @@ def test_emitter_rejects_and_resamples_near_obstacles():
     assert (distance >= s.radius + 1e-3).all()
 
 
-def test_emitter_too_crowded_region_is_an_error():
+def test_emitter_hopeless_region_stops_early_and_says_how_many_draws():
     block = RoundedBoxes(center=[[0.0, 0.0, 0.0]], half_extents=[[2.0, 2.0, 2.0]])
-    with pytest.raises(ValueError, match="too crowded"):
+    with pytest.raises(ValueError) as info:
         Emitter(count=10).spawn(block)
+    assert str(info.value) == (
+        "emitter region is too crowded: not one of 320 draws (32 for each of the 10 spheres) was "
+        "clear of the obstacles (signed distance >= radius + clearance), so spawning stopped "
+        "early; the obstacles fill (almost) all of the region (center [0.0, 0.0, 0.0], "
+        "half_extents [0.5, 0.5, 0.5]): move or enlarge it, or use smaller spheres")
+    with pytest.raises(ValueError) as info:  # one sphere: all 200 of its draws are made
+        Emitter(count=1).spawn(block)
+    assert str(info.value).startswith("emitter region is too crowded: 1 of 1 spheres were not "
+                                      "clear of the obstacles (signed distance >= radius + "
+                                      "clearance) in 200 draws each; ")
+
+
+def test_emitter_few_spheres_get_all_their_draws():
+    # 90 % of the region is obstacle: one sphere fails 32 draws in 3.4 % of the seeds, but all
+    # 200 only with probability 0.9**200 = 7e-10, so every one of these seeds places it.
+    block = RoundedBoxes(center=[[-0.2, 0.0, 0.0]], half_extents=[[1.0, 1.0, 1.0]])
+    emitter = Emitter(count=1, half_extents=(1.0, 0.5, 0.5), radius=0.0, clearance=0.0)
+    for seed in range(200):
+        p = emitter.spawn(block, seed=seed).position
+        assert p[0, 0] >= 0.8
+
+
+def _plate_scene(radius: str) -> str:
+    """A plate at x = 0 that every point of the region [-1, 1]^3 is within 1 m of."""
+    return ("[[box]]\ncenter = [0.0, 0.0, 0.0]\nhalf_extents = [0.0, 10.0, 10.0]\n"
+            f"[emitter]\ncount = 50\nhalf_extents = [1.0, 1.0, 1.0]\nradius = {radius}\n")
+
+
+def test_emitter_partly_crowded_region_counts_the_spheres_left(tmp_path):
+    # Spheres with radius + clearance above 1 m fit nowhere, the others almost surely do.
+    scene = load_scene(write(tmp_path, _plate_scene("[0.01, 1.5]")))
+    radius = scene.emitter.spawn(RoundedBoxes(center=[[0.0, 50.0, 0.0]],
+                                              half_extents=[[0.0, 0.0, 0.0]])).radius
+    hopeless = int((radius + 1e-3 > 1.0).sum())
+    with pytest.raises(SceneFileError) as info:
+        scene.spawn()
+    left = int(re.match(r"scene\.toml: emitter region is too crowded: (\d+) of 50 spheres were "
+                        r"not clear of the obstacles \(signed distance >= radius \+ clearance\) "
+                        r"in 200 draws each; ", str(info.value)).group(1))
+    assert hopeless <= left <= hopeless + 3
+
+
+@pytest.mark.parametrize("radius", ["1e30", "[0.01, 1.2]"])
+def test_emitter_radius_that_fits_nowhere_is_refused_first(tmp_path, radius):
+    scene = load_scene(write(tmp_path, _plate_scene(radius)))
+    largest = float(radius.strip("[]").split(",")[-1])
+    bound = math.sqrt(3.0)  # farthest corner of the region from the plate's centre
+    message = (f"emitter radius up to {largest:g} m plus clearance 0.001 m fits nowhere: no point "
+               f"of the region (center [0.0, 0.0, 0.0], half_extents [1.0, 1.0, 1.0]) is "
+               f"farther than {bound:.3g} m from box 0; use smaller spheres or move the region")
+    with pytest.raises(SceneFileError) as info:
+        scene.spawn()
+    if largest > bound:
+        assert str(info.value) == f"scene.toml: {message}"
+    else:  # fits the bound, but not the plate: the crowding error
+        assert "too crowded" in str(info.value)
+    with pytest.raises(ValueError) as info:  # the API, without a file
+        scene.emitter.spawn(scene.boxes)
+    assert not isinstance(info.value, SceneFileError)
+    assert (str(info.value) == message) == (largest > bound)
+
+
+def test_spawn_refuses_a_swarm_inside_an_obstacle_from_any_emitter(tmp_path):
+    class Dropper:  # an emitter of our own: the scene still checks what it returns
+        def spawn(self, boxes, n=None, seed=None):
+            return warpsim.Swarm(position=[[0.0, 5.0, 0.0], [3.0, 0.1, 0.0]],
+                                 velocity=np.zeros((2, 3)), radius=0.2)
+    scene = Scene(load_scene(write(tmp_path, MINIMAL)).boxes, emitter=Dropper())
+    with pytest.raises(ValueError) as info:
+        scene.spawn()
+    assert str(info.value) == ("sphere 1 starts 0.6 m inside box 1 (position (3, 0.1, 0), "
+                               "radius 0.2): spheres must start outside the obstacles or "
+                               "touching them")
+    with pytest.raises(ValueError, match=r"n must be >= 1, got 0"):
+        scene.spawn(n=0)
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    ({"count": 0}, "count must be >= 1"),
-    ({"count": True}, "count must be an integer"),
-    ({"count": 1, "radius": -0.1}, "radius must be >= 0"),
-    ({"count": 1, "mass": (0.0, 1.0)}, "mass[0] must be > 0"),
-    ({"count": 1, "half_extents": (1.0, -1.0, 1.0)}, "half_extents[1] must be >= 0"),
-    ({"count": 1, "cone_deg": 181.0}, "cone_deg must be <= 180"),
-    ({"count": 1, "speed": (2.0, 1.0)}, "speed must be a scalar or [min, max] with min <= max"),
-    ({"count": 1, "direction": (0.0, 0.0, 0.0)}, "direction must be a non-zero vector"),
-    ({"count": 1, "velocity": (0.0, float("nan"), 0.0)}, "velocity must be finite"),
-    ({"count": 1, "seed": -3}, "seed must be >= 0"),
+    ({"count": 0}, "count must be >= 1, got 0"),
+    ({"count": True}, "count must be an integer, got True"),
+    ({"count": 2**31}, "count must be <= 2147483647 (integers must be below 2**31), got "
+                       "2147483648"),
+    ({"count": 1, "radius": -0.1}, "radius must be >= 0, got -0.1"),
+    ({"count": 1, "radius": "0.1"}, "radius must be a number, got '0.1'"),
+    ({"count": 1, "radius": None}, "radius must be a number, got None"),
+    ({"count": 1, "mass": (0.0, 1.0)}, "mass[0] must be > 0, got 0"),
+    ({"count": 1, "mass": (1.0, True)}, "mass[1] must be a number, got True"),
+    ({"count": 1, "half_extents": (1.0, -1.0, 1.0)}, "half_extents[1] must be >= 0, got -1"),
+    ({"count": 1, "speed": 1.0, "cone_deg": 181.0}, "cone_deg must be <= 180, got 181"),
+    ({"count": 1, "speed": (2.0, 1.0)},
+     "speed must be a scalar or [min, max] with min <= max, got [2, 1]"),
+    ({"count": 1, "speed": 1.0, "direction": (0.0, 0.0, 0.0)},
+     "direction must be a non-zero vector, got (0, 0, 0)"),
+    ({"count": 1, "direction": (1.0, 0.0, 0.0)},
+     "direction only shapes the speed term: give speed too, or leave direction out"),
+    ({"count": 1, "cone_deg": 30.0},
+     "cone_deg only shapes the speed term: give speed too, or leave cone_deg out"),
+    ({"count": 1, "velocity": (0.0, float("nan"), 0.0)},
+     "velocity must be finite, got (0, nan, 0)"),
+    ({"count": 1, "seed": -3}, "seed must be >= 0, got -3"),
+    ({"count": 1, "seed": 1.0}, "seed must be an integer, got 1.0"),
+    ({"count": 1, "clearance": np.array(True)},
+     "clearance must hold numbers, got an array of bool"),
 ])
 def test_emitter_validation(kwargs, message):
-    with pytest.raises(ValueError, match=re.escape(message)):
+    with pytest.raises(ValueError) as info:
         Emitter(**kwargs)
+    assert str(info.value) == message
+
+
+def test_emitter_speed_defaults_its_cone():
+    e = Emitter(count=1, speed=2.0)
+    assert (e.speed, e.direction, e.cone_deg) == ((2.0, 2.0), (0.0, 1.0, 0.0), 180.0)
+    assert Emitter(count=1, speed=2.0, direction=(0.0, 1.0, 0.0), cone_deg=180.0) == e
+    assert Emitter.from_table({"count": 1, "speed": 2.0}) == e
+    with pytest.raises(ValueError, match=r"^unknown key 'sped' in \[emitter\]$"):
+        Emitter.from_table({"count": 1, "sped": 2.0})
 
 
 def test_inputs_are_never_mutated():

@@ -247,7 +247,7 @@ def test_bad_input_names_field_and_index(kwargs, message):
 
 
 @pytest.mark.parametrize("kwargs,message", [
-    (dict(half_extents=(1, -0.5, 1)), r"half_extents must be >= 0"),
+    (dict(half_extents=(1, -0.5, 1)), r"half_extents\[1\] must be >= 0, got -0.5"),
     (dict(rotation=(0, 0, 0, 0)), r"rotation must be a finite non-zero quaternion"),
     (dict(radius=-0.1), r"radius must be >= 0"),
     (dict(center=(0, np.nan, 0)), r"center must be finite"),

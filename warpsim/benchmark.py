@@ -35,9 +35,9 @@ import warp as wp
 
 from .collide import collide_boxes
 from .device import BVH_MIN_BOXES, resolve_device, use_bvh
-from .kernels.precision import precision
 from .kernels.collide_kernels import collide_kernel
 from .kernels.frame_kernel import frame_kernel
+from .kernels.precision import precision
 from .model import Spheres, kernel_arguments, put_model, to_device
 from .numpy_sweep import sweep_boxes_numpy
 from .obstacles import RoundedBoxes
@@ -325,8 +325,8 @@ def device_sweep(boxes, position, velocity, radius, dt, precision_name, device,
     """
     p = precision(precision_name)
     n = len(position)
-    kernel = collide_kernel(p.name, bvh)
-    model = put_model(boxes, p, device, bvh=bvh, dt=dt)
+    kernel = collide_kernel(p.name, "bvh" if bvh else "brute")
+    model = put_model(boxes, p, device, broad_phase="bvh" if bvh else "brute", dt=dt)
     out = {"box_out": wp.empty(n, dtype=wp.int32, device=device),
            "t_out": wp.empty(n, dtype=p.scalar, device=device)}
     for name in ("contact_out", "normal_out", "new_position_out", "new_velocity_out"):
@@ -397,8 +397,8 @@ def broad_phase_row(n: int, k: int, cfg: dict, device) -> dict:
 def bench_sweep(cfg: dict, device) -> dict:
     """Sweep throughput: Warp kernel alone, ``collide_boxes`` end to end, NumPy; agreement.
     Then brute force against the BVH broad phase for many boxes."""
-    compile_s = build_kernel(collide_kernel("float32", False), device)
-    compile_bvh = build_kernel(collide_kernel("float32", True), device)
+    compile_s = build_kernel(collide_kernel("float32", "brute"), device)
+    compile_bvh = build_kernel(collide_kernel("float32", "bvh"), device)
     rows = [sweep_row(n, k, cfg, device) for k in cfg["sweep_k"] for n in cfg["sweep_n"]]
     print_table("Sweep throughput, float32 (one frame, dt = 1/60 s), brute force", rows, [
         ("N", "n", ",d"), ("K", "k", "d"), ("hit", "hit_fraction", ".1%"),
@@ -431,7 +431,8 @@ def variant_setup(name: str, boxes: RoundedBoxes):
     prec = sim_kw.get("precision", "float32")
     bounces = sim_kw.get("max_bounces", BASE_MAX_BOUNCES)
     kernel = frame_kernel(prec, bounces, scene.friction > 0.0, scene.energy_correction,
-                          scene.energy_retention < 1.0, use_bvh("auto", len(boxes)))
+                          scene.energy_retention < 1.0,
+                          "bvh" if use_bvh("auto", len(boxes)) else "brute")
     return scene, {"precision": prec, "max_bounces": bounces}, kernel
 
 
@@ -498,7 +499,7 @@ def galton_broad_phase(cfg: dict, device) -> dict:
     flags = (scene.max_bounces, scene.friction > 0.0, scene.energy_correction,
              scene.energy_retention < 1.0)
     compile_rows = [{"variant": f"galton {bp}",
-                     **build_kernel(frame_kernel("float32", *flags, bp == "bvh"), device)}
+                     **build_kernel(frame_kernel("float32", *flags, bp), device)}
                     for bp in ("brute", "bvh")]
     rows = []
     for n in cfg["galton_n"]:
@@ -542,7 +543,8 @@ def sweep_accuracy(cfg: dict, device) -> dict:
     away; float32 and float64 throughput side by side."""
     n, k = cfg["acc_sweep_n"], cfg["acc_sweep_k"]
     boxes, pos, vel, rad = sweep_inputs(n, k, seed=SEED + 1)
-    compile_s = {p: build_kernel(collide_kernel(p, False), device) for p in ("float32", "float64")}
+    compile_s = {p: build_kernel(collide_kernel(p, "brute"), device)
+                 for p in ("float32", "float64")}
     rows = []
     for offset in (0.0, FAR_OFFSET):
         moved = RoundedBoxes(boxes.center + offset, boxes.half_extents, boxes.rotation,
@@ -603,7 +605,8 @@ def step_size_error(cfg: dict, device) -> list[dict]:
         scene = Scene(boxes, energy_correction=correction)
         for prec in ("float32", "float64"):
             build_kernel(frame_kernel(prec, BASE_MAX_BOUNCES, False, correction, False,
-                                      use_bvh("auto", len(boxes))), device)
+                                      "bvh" if use_bvh("auto", len(boxes)) else "brute"),
+                         device)
             for dt in STEP_SIZES:
                 sim = Simulator(scene, swarm, dt=dt, max_bounces=BASE_MAX_BOUNCES,
                                 device=device, precision=prec)

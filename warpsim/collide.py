@@ -7,12 +7,14 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from . import broad_phase as broad
 from . import validation as check
-from .device import resolve_device, use_bvh
+from .device import resolve_device
 from .kernels import precision as fp
 from .kernels.collide_kernels import bounce_kernel, collide_kernel
 from .model import Spheres, launch, put_model, to_device
 from .obstacles import RoundedBox, RoundedBoxes
+from .swarm import Swarm
 
 
 @dataclass
@@ -60,10 +62,9 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
         dt: frame duration [s], > 0.
         device: Warp device (``"cpu"``, ``"cuda:0"``; None for Warp's default).
         precision: ``"float32"`` or ``"float64"`` kernels.
-        broad_phase: how each sphere finds its candidate boxes: ``"brute"`` tries every box,
-            ``"bvh"`` queries a BVH over the boxes' bounds (built per call), ``"auto"`` takes
-            the BVH from ``warpsim.device.BVH_MIN_BOXES`` boxes on. The results are
-            bit-identical; only the speed differs.
+        broad_phase: how each sphere finds its candidate boxes (see
+            :mod:`warpsim.broad_phase`): ``"brute"``, ``"bvh"``, ``"grid"`` or ``"auto"``
+            (built per call). The results are bit-identical; only the speed differs.
 
     Returns:
         :class:`Contacts`, arrays of the chosen precision.
@@ -73,12 +74,12 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
     """
     boxes, pos, vel, rad = check.sphere_batch(position, velocity, radius, boxes)
     n = pos.shape[0]
-    dt = check.scalar("dt", dt, positive=True)
+    dt = check.scene_settings({"dt": dt})["dt"]
     p = precision_of(precision)
-    bvh = use_bvh(broad_phase, len(boxes))
     dev = resolve_device(device)
-
-    model = put_model(boxes, p, dev, bvh=bvh, dt=dt)
+    method, grid = broad.choose(broad_phase, boxes, broad.reach(pos, vel, rad, (0, 0, 0), dt),
+                                p.np_dtype)
+    model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt)
     spheres = Spheres(radius=to_device(rad, p.scalar, p, dev), mass=None)
     state = {"position": to_device(pos, p.vec3, p, dev),
              "velocity": to_device(vel, p.vec3, p, dev)}
@@ -86,7 +87,7 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
            "t_out": wp.empty(n, dtype=p.scalar, device=dev)}
     for name in ("contact_out", "normal_out", "new_position_out", "new_velocity_out"):
         out[name] = wp.empty(n, dtype=p.vec3, device=dev)
-    launch(collide_kernel(p.name, bvh), n, dev, model=model, spheres=spheres,
+    launch(collide_kernel(p.name, method), n, dev, model=model, spheres=spheres,
            state_in=state, outputs=out)
     box = out["box_out"].numpy()
     return Contacts(hit=box >= 0, t=out["t_out"].numpy(), position=out["contact_out"].numpy(),
@@ -158,28 +159,29 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
         max_angular_speed: clamp on ``|L| / I`` [rad/s], > 0.
         energy_retention: kept fraction of kinetic energy per contact, in (0, 1].
         device: Warp device. precision: ``"float32"`` or ``"float64"``.
-        broad_phase: ``"auto"``, ``"bvh"`` or ``"brute"``, as in :func:`collide_boxes`
+        broad_phase: ``"auto"``, ``"bvh"``, ``"grid"`` or ``"brute"``, as in :func:`collide_boxes`
             (bit-identical results).
 
     Raises:
         ValueError: a bad input, naming the field and the index.
     """
     boxes, pos, vel, rad = check.sphere_batch(position, velocity, radius, boxes)
-    n = pos.shape[0]
-    mas = check.per_item("mass", mass, n, positive=True)
-    mom = (np.zeros((n, 3)) if angular_momentum is None
-           else check.vec3_array("angular_momentum", angular_momentum, n))
-    dt = check.scalar("dt", dt, positive=True)
-    max_bounces = check.positive_int("max_bounces", max_bounces)
-    friction = check.scalar("friction", friction, minimum=0.0)
-    max_rot = check.scalar("max_angular_speed", max_angular_speed, positive=True)
-    retention = check.scalar("energy_retention", energy_retention, positive=True, maximum=1.0)
+    # the same checks as a Swarm's and a Scene's, so the messages are the same too
+    swarm = Swarm(pos, vel, radius=rad, mass=mass, angular_momentum=angular_momentum)
+    mas, mom, n = swarm.mass, swarm.angular_momentum, len(swarm)
+    settings = check.scene_settings({"dt": dt, "max_bounces": max_bounces, "friction": friction,
+                                     "max_angular_speed": max_angular_speed,
+                                     "energy_retention": energy_retention})
+    dt, max_bounces = settings["dt"], settings["max_bounces"]
+    friction, max_rot = settings["friction"], settings["max_angular_speed"]
+    retention = settings["energy_retention"]
     p = precision_of(precision)
-    bvh = use_bvh(broad_phase, len(boxes))
     dev = resolve_device(device)
+    method, grid = broad.choose(broad_phase, boxes, broad.reach(pos, vel, rad, (0, 0, 0), dt),
+                                p.np_dtype)
 
-    kernel = bounce_kernel(p.name, max_bounces, friction > 0.0, retention < 1.0, bvh)
-    model = put_model(boxes, p, dev, bvh=bvh, dt=dt, friction=friction,
+    kernel = bounce_kernel(p.name, max_bounces, friction > 0.0, retention < 1.0, method)
+    model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt, friction=friction,
                       max_angular_speed=max_rot, energy_retention=retention)
     spheres = Spheres(radius=to_device(rad, p.scalar, p, dev),
                       mass=to_device(mas, p.scalar, p, dev))

@@ -11,7 +11,8 @@ kept only when its signed distance to every box is at least the sphere's radius 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -25,34 +26,23 @@ probability ``(1 - f)^200`` where ``f`` is the free fraction of the region: belo
 ``f >= 10%``, so a failure means the obstacles fill almost all of the region."""
 
 HOPELESS_ROUNDS = 32
-"""Give up early when not a single candidate was accepted in this many rounds: the region is
-(nearly) all obstacle, and drawing the remaining rounds would only waste time."""
+"""Stop early, after this many rounds, when not one draw so far was clear and at least
+``MAX_PLACEMENT_ROUNDS`` draws were made over all the spheres: that many misses in a row are as
+unlikely as one sphere's ``MAX_PLACEMENT_ROUNDS`` misses, and drawing on would only waste time
+in a region that is (nearly) all obstacle."""
 
 DEFAULT_CLEARANCE = 1e-3
 """Gap [m] kept between a new sphere and the nearest obstacle surface: a sphere that starts
 exactly in contact is legal for the kernels but makes a poor initial state (its first contact
 would be at ``t = 0``), and float32 rounding of the stored position must not push it inside."""
 
+HELPER_AXIS_COS = 0.9
+"""The cone's frame is built from the cross product with world x, or with world y when the axis
+is within ``acos(0.9)`` (26 degrees) of x: the cross product then keeps a length of at least
+0.43, far from the cancellation of nearly parallel vectors."""
 
-def _pair(name: str, value, *, minimum: float | None = None,
-          positive: bool = False) -> tuple[float, float]:
-    """A scalar ``x`` as ``(x, x)`` or a ``[min, max]`` pair, bounded, with ``min <= max``."""
-    arr = np.asarray(value, dtype=object)
-    if arr.ndim == 0:
-        x = check.scalar(name, value, minimum=minimum, positive=positive)
-        return (x, x)
-    lo, hi = check.per_item(name, value, 2, minimum=minimum, positive=positive)
-    if lo > hi:
-        raise ValueError(f"{name} must be a scalar or [min, max] with min <= max, "
-                         f"got [{lo:g}, {hi:g}]")
-    return (float(lo), float(hi))
-
-
-def _vec3(name: str, value, *, nonnegative: bool = False) -> tuple[float, float, float]:
-    arr = check.vec3(name, value)
-    if nonnegative:
-        check.per_item(name, arr, 3, minimum=0.0)
-    return (float(arr[0]), float(arr[1]), float(arr[2]))
+_CORNER_SIGNS = np.array([[sx, sy, sz] for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)
+                          for sz in (-1.0, 1.0)])
 
 
 @dataclass(frozen=True)
@@ -76,8 +66,10 @@ class Emitter:
             each >= 0.
         speed: None, or the speed [m/s] of the cone term: a scalar or a ``(min, max)`` range;
             >= 0.
-        direction: axis of the cone (any non-zero length), shape (3,).
-        cone_deg: half angle of the cone [deg], in [0, 180].
+        direction: axis of the cone (any non-zero length), shape (3,); only with ``speed``
+            (refused without it, where it would do nothing); None there means ``(0, 1, 0)``.
+        cone_deg: half angle of the cone [deg], in [0, 180]; only with ``speed``; None there
+            means 180 (every direction).
         angular_momentum: initial angular momentum of every sphere [kg m^2/s], shape (3,).
         seed: default seed of :meth:`spawn`, an integer >= 0.
         clearance: minimum gap between a new sphere and any obstacle [m], >= 0.
@@ -94,32 +86,37 @@ class Emitter:
     velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     velocity_jitter: tuple[float, float, float] = (0.0, 0.0, 0.0)
     speed: float | tuple[float, float] | None = None
-    direction: tuple[float, float, float] = (0.0, 1.0, 0.0)
-    cone_deg: float = 180.0
+    direction: tuple[float, float, float] | None = None
+    cone_deg: float | None = None
     angular_momentum: tuple[float, float, float] = (0.0, 0.0, 0.0)
     seed: int = 0
     clearance: float = DEFAULT_CLEARANCE
 
     def __post_init__(self):
-        fields = {
-            "count": check.positive_int("count", self.count),
-            "center": _vec3("center", self.center),
-            "half_extents": _vec3("half_extents", self.half_extents, nonnegative=True),
-            "radius": _pair("radius", self.radius, minimum=0.0),
-            "mass": _pair("mass", self.mass, positive=True),
-            "velocity": _vec3("velocity", self.velocity),
-            "velocity_jitter": _vec3("velocity_jitter", self.velocity_jitter, nonnegative=True),
-            "speed": None if self.speed is None else _pair("speed", self.speed, minimum=0.0),
-            "direction": _vec3("direction", self.direction),
-            "cone_deg": check.scalar("cone_deg", self.cone_deg, minimum=0.0, maximum=180.0),
-            "angular_momentum": _vec3("angular_momentum", self.angular_momentum),
-            "seed": check.positive_int("seed", self.seed, minimum=0),
-            "clearance": check.scalar("clearance", self.clearance, minimum=0.0),
-        }
-        if not np.linalg.norm(fields["direction"]) > 0.0:
-            raise ValueError(f"direction must be a non-zero vector, got {fields['direction']}")
-        for name, value in fields.items():
+        checked = check.emitter_fields({f.name: getattr(self, f.name) for f in fields(self)})
+        for name, value in checked.items():
             object.__setattr__(self, name, value)
+
+    @classmethod
+    def from_table(cls, table: Mapping[str, object], where: str = "emitter") -> Emitter:
+        """An emitter from a mapping of its fields, such as a scene file's ``[emitter]`` table.
+
+        Args:
+            table: field name -> raw value; ``count`` is required, the others default.
+            where: the table's name, put before the field names in messages
+                (``emitter.radius must be >= 0, got -0.1``).
+
+        Raises:
+            ValueError: for an unknown or missing field or a bad value, naming ``where.field``.
+        """
+        known = {f.name: f.default for f in fields(cls)}
+        for key in table:
+            if key not in known:
+                raise ValueError(f"unknown key {key!r} in [{where}]")
+        if "count" not in table:
+            raise ValueError(f"{where}.count is required")
+        values = {key: table.get(key, default) for key, default in known.items()}
+        return cls(**check.emitter_fields(values, where=f"{where}."))
 
     def spawn(self, boxes: RoundedBoxes, n: int | None = None, seed: int | None = None) -> Swarm:
         """Draw ``n`` spheres clear of ``boxes``.
@@ -135,13 +132,16 @@ class Emitter:
             ``boxes.signed_distance(p) >= radius + clearance``.
 
         Raises:
-            ValueError: on a bad ``n`` or ``seed``, or when the region is too crowded by
-                obstacles to place every sphere within the bounded number of draws.
+            ValueError: on a bad ``n`` or ``seed``; when the largest radius plus the clearance
+                fits nowhere in the region (checked first); or when the region is too crowded
+                by obstacles to place every sphere in :data:`MAX_PLACEMENT_ROUNDS` draws each
+                (the message says how many draws were made).
         """
         if not isinstance(boxes, RoundedBoxes):
             raise ValueError(f"boxes must be a warpsim.RoundedBoxes, got {type(boxes).__name__}")
         n = self.count if n is None else check.positive_int("n", n)
         seed = self.seed if seed is None else check.positive_int("seed", seed, minimum=0)
+        self._check_radius_fits(boxes)
         # One independent stream per quantity: changing the velocity rule leaves the positions
         # (and radii, masses) of a seed unchanged.
         radius_rng, mass_rng, velocity_rng, position_rng = (
@@ -152,6 +152,28 @@ class Emitter:
         position = self._positions(position_rng, boxes, radius)
         return Swarm(position=position, velocity=velocity, radius=radius, mass=mass,
                      angular_momentum=np.tile(np.asarray(self.angular_momentum), (n, 1)))
+
+    def _region(self) -> str:
+        return f"center {list(self.center)}, half_extents {list(self.half_extents)}"
+
+    def _check_radius_fits(self, boxes: RoundedBoxes) -> None:
+        """Refuse a radius that fits nowhere in the region, before any draw.
+
+        The signed distance from ``p`` to box ``k`` is at most ``|p - c_k| - rb_k`` (the centre
+        is in the core box), and over the region ``|p - c_k|`` is largest at a corner: no point
+        of the region is farther than ``max_corner |corner - c_k| - rb_k`` from box ``k``.
+        """
+        if len(boxes) == 0:
+            return
+        corners = np.asarray(self.center) + _CORNER_SIGNS * np.asarray(self.half_extents)
+        farthest = np.linalg.norm(corners[:, None, :] - boxes.center[None], axis=2).max(axis=0)
+        bound = farthest - boxes.radius
+        k = int(np.argmin(bound))
+        if self.radius[1] + self.clearance > bound[k]:
+            raise ValueError(
+                f"emitter radius up to {self.radius[1]:g} m plus clearance {self.clearance:g} m "
+                f"fits nowhere: no point of the region ({self._region()}) is farther than "
+                f"{bound[k]:.3g} m from box {k}; use smaller spheres or move the region")
 
     def _velocities(self, rng: np.random.Generator, n: int) -> np.ndarray:
         velocity = np.asarray(self.velocity) + np.asarray(self.velocity_jitter) * rng.uniform(
@@ -179,26 +201,33 @@ class Emitter:
         pending = np.arange(n)
         if len(boxes) == 0:
             return position
-        for round_index in range(MAX_PLACEMENT_ROUNDS):
-            clear = (boxes.signed_distance(position[pending]).min(axis=1)
-                     >= radius[pending] + self.clearance)
-            pending = pending[~clear]
+        for rounds in range(1, MAX_PLACEMENT_ROUNDS + 1):
+            need = radius[pending] + self.clearance
+            distance, _ = boxes.nearest(position[pending], within=need)
+            pending = pending[~(distance >= need)]
             if pending.size == 0:
                 return position
-            if round_index + 1 == HOPELESS_ROUNDS and pending.size == n:
-                break
-            position[pending] = center + half * rng.uniform(-1.0, 1.0, size=(pending.size, 3))
+            if (pending.size == n and HOPELESS_ROUNDS <= rounds < MAX_PLACEMENT_ROUNDS
+                    and rounds * n >= MAX_PLACEMENT_ROUNDS):
+                raise ValueError(
+                    f"emitter region is too crowded: not one of {rounds * n} draws ({rounds} for "
+                    f"each of the {n} spheres) was clear of the obstacles (signed distance >= "
+                    f"radius + clearance), so spawning stopped early; the obstacles fill "
+                    f"(almost) all of the region ({self._region()}): move or enlarge it, or use "
+                    f"smaller spheres")
+            if rounds < MAX_PLACEMENT_ROUNDS:
+                position[pending] = center + half * rng.uniform(-1.0, 1.0, size=(pending.size, 3))
         raise ValueError(
-            f"emitter region is too crowded: {pending.size} of {n} spheres could not be placed "
-            f"clear of the obstacles (signed distance >= radius + clearance) after "
-            f"{round_index + 1} draws each; the obstacles fill (almost) all of the region "
-            f"center {list(self.center)}, half_extents {list(self.half_extents)}: move or "
-            f"enlarge the region, or use smaller spheres")
+            f"emitter region is too crowded: {pending.size} of {n} spheres were not clear of the "
+            f"obstacles (signed distance >= radius + clearance) in {MAX_PLACEMENT_ROUNDS} draws "
+            f"each; the obstacles fill almost all of the region ({self._region()}): move or "
+            f"enlarge it, or use smaller spheres")
 
 
 def _orthonormal_pair(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors completing the unit ``axis`` to a right-handed orthonormal basis."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    helper = (np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < HELPER_AXIS_COS
+              else np.array([0.0, 1.0, 0.0]))
     u = np.cross(axis, helper)
     u /= np.linalg.norm(u)
     return u, np.cross(axis, u)

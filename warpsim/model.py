@@ -22,6 +22,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import warp as wp
 
+from .broad_phase import Grid
 from .device import bvh_bounds
 from .kernels.precision import Precision
 from .obstacles import RoundedBoxes
@@ -45,6 +46,10 @@ class Model:
             (K,) of vec3, for the cheap per-box reject.
         box_bvh: id of a :class:`warp.Bvh` over the reject bounds (float32, rounded outward), or
             0 when no BVH was built (then kernels built without the BVH never read it).
+        grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes: the
+            uniform grid of :class:`warpsim.broad_phase.Grid` (lowest corner [m], cell size [m],
+            cells per axis, margin [m], CSR cell lists); a single empty cell when the scene
+            runs without a grid (kernels built without it never read them).
         gravity: [m/s^2], world frame. origin: reference point of the potential energy [m].
         dt: frame duration [s]. friction: ``k_f`` [kg/s]. max_rot: clamp on ``|Rot|`` [rad/s].
         retention: fraction of the kinetic energy kept at each contact.
@@ -60,6 +65,12 @@ class Model:
     box_radius: wp.array
     box_extent: wp.array
     box_bvh: wp.uint64
+    grid_lower: object
+    grid_cell: object
+    grid_dims: wp.vec3i
+    grid_margin: object
+    grid_cell_start: wp.array
+    grid_cell_boxes: wp.array
     gravity: object
     origin: object
     dt: object
@@ -122,9 +133,10 @@ def to_device(values: np.ndarray, dtype, p: Precision, device) -> wp.array:
     return wp.array(np.ascontiguousarray(values, dtype=p.np_dtype), dtype=dtype, device=device)
 
 
-def put_model(boxes: RoundedBoxes, p: Precision, device, *, bvh: bool, dt: float,
-              gravity=(0.0, 0.0, 0.0), origin=(0.0, 0.0, 0.0), friction: float = 0.0,
-              max_angular_speed: float = 50.0, energy_retention: float = 1.0) -> Model:
+def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt: float,
+              grid: Grid | None = None, gravity=(0.0, 0.0, 0.0), origin=(0.0, 0.0, 0.0),
+              friction: float = 0.0, max_angular_speed: float = 50.0,
+              energy_retention: float = 1.0) -> Model:
     """The obstacles and physics constants as a :class:`Model` on ``device``.
 
     The values must already be validated (``warpsim.validation``; :class:`warpsim.Scene` and
@@ -134,7 +146,9 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, bvh: bool, dt: float
         boxes: the obstacles (float64, world frame).
         p: precision of the arrays and scalars.
         device: Warp device.
-        bvh: build a BVH over the boxes (the kernels' ``box_bvh``); ignored without boxes.
+        broad_phase: the kernels' broad phase (``kernels.nearest.BROAD_PHASES``): ``"bvh"`` and
+            ``"grid-bvh"`` build a BVH over the boxes (``box_bvh``; none without boxes).
+        grid: the grid of ``"grid"`` and ``"grid-bvh"`` (:func:`warpsim.broad_phase.choose`).
         dt: frame duration [s]. gravity: [m/s^2]. origin: potential reference point [m].
         friction: ``k_f`` [kg/s]. max_angular_speed: ``|Rot|`` clamp [rad/s].
         energy_retention: kept fraction of kinetic energy per contact.
@@ -142,8 +156,10 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, bvh: bool, dt: float
     dtype = p.np_dtype
     center = boxes.center.astype(dtype)
     extent = boxes.world_extent().astype(dtype)
+    if broad_phase in ("grid", "grid-bvh") and grid is None:
+        raise ValueError(f"broad_phase {broad_phase!r} needs its grid")
     tree = None
-    if bvh and len(boxes):
+    if broad_phase in ("bvh", "grid-bvh") and len(boxes):
         lower, upper = bvh_bounds(center, extent)
         # SAH on every device: the best trees for queries, and its builder caps the depth at
         # the query stack's size (a static scene builds it once)
@@ -157,10 +173,26 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, bvh: bool, dt: float
         box_radius=wp.array(boxes.radius.astype(dtype), dtype=p.scalar, device=device),
         box_extent=wp.array(extent, dtype=p.vec3, device=device),
         box_bvh=wp.uint64(tree.id if tree is not None else 0),
+        **_grid_fields(grid if broad_phase in ("grid", "grid-bvh") else None, p, device),
         gravity=p.vec3(*np.asarray(gravity, dtype=np.float64)),
         origin=p.vec3(*np.asarray(origin, dtype=np.float64)),
         dt=p.scalar(dt), friction=p.scalar(friction), max_rot=p.scalar(max_angular_speed),
         retention=p.scalar(energy_retention), precision=p, device=device, bvh=tree)
+
+
+def _grid_fields(grid: Grid | None, p: Precision, device) -> dict:
+    """The ``grid_*`` fields of a :class:`Model` (one empty cell without a grid)."""
+    if grid is None:
+        return {"grid_lower": p.vec3(0.0, 0.0, 0.0), "grid_cell": p.vec3(1.0, 1.0, 1.0),
+                "grid_dims": wp.vec3i(0, 0, 0), "grid_margin": p.scalar(0.0),
+                "grid_cell_start": wp.zeros(2, dtype=wp.int32, device=device),
+                "grid_cell_boxes": wp.zeros(1, dtype=wp.int32, device=device)}
+    return {"grid_lower": p.vec3(*grid.lower), "grid_cell": p.vec3(*grid.cell),
+            "grid_dims": wp.vec3i(*(int(x) for x in grid.dims)),
+            "grid_margin": p.scalar(grid.margin),
+            "grid_cell_start": wp.array(grid.cell_start, dtype=wp.int32, device=device),
+            "grid_cell_boxes": wp.array(np.append(grid.cell_boxes, np.int32(0)),
+                                        dtype=wp.int32, device=device)}
 
 
 def put_spheres(radius: np.ndarray, mass: np.ndarray, p: Precision, device) -> Spheres:

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import os
+
 from . import validation as check
 from .obstacles import RoundedBoxes
+from .scene_files import SceneFileError, read_scene_file
 
 DEFAULT_GRAVITY = (0.0, -9.81, 0.0)
 
@@ -21,12 +24,16 @@ class Scene:
         max_angular_speed: clamp on ``|Rot|`` [rad/s], > 0.
         name: short name (bundled scenes use their file stem).
         description: one line for listings.
-        emitter: where spheres come from when the scene is loaded from a file (see
-            :meth:`spawn`); None for scenes built in code.
+        emitter: where spheres come from (see :meth:`spawn`), such as a
+            :class:`warpsim.Emitter`; None for scenes whose swarms are built in code.
         dt: default time step [s] for this scene, > 0.
         frames: default number of frames to simulate, >= 1.
-        max_bounces: default cap of contacts per sphere per frame, >= 1.
+        max_bounces: default cap of contacts per sphere per frame, in
+            ``[1, warpsim.validation.MAX_BOUNCES]``.
         source: the file the scene was read from, if any.
+
+    Raises:
+        ValueError: naming the bad argument (the checks are :mod:`warpsim.validation`'s).
     """
 
     def __init__(self, boxes: RoundedBoxes, gravity=DEFAULT_GRAVITY, friction: float = 0.0,
@@ -36,43 +43,59 @@ class Scene:
                  frames: int = 240, max_bounces: int = 8, source: str | None = None):
         if not isinstance(boxes, RoundedBoxes):
             raise ValueError(f"boxes must be a warpsim.RoundedBoxes, got {type(boxes).__name__}")
+        settings = check.scene_settings(dict(
+            gravity=gravity, friction=friction, energy_retention=energy_retention,
+            energy_correction=energy_correction, max_angular_speed=max_angular_speed, dt=dt,
+            frames=frames, max_bounces=max_bounces))
         self.boxes = boxes
-        self.gravity = check.frozen(check.vec3("gravity", gravity))
-        self.friction = check.scalar("friction", friction, minimum=0.0)
-        self.energy_retention = check.scalar("energy_retention", energy_retention,
-                                             positive=True, maximum=1.0)
-        if not isinstance(energy_correction, bool):
-            raise ValueError(f"energy_correction must be true or false, got {energy_correction!r}")
-        self.energy_correction = energy_correction
-        self.max_angular_speed = check.scalar("max_angular_speed", max_angular_speed,
-                                              positive=True)
+        self.gravity = check.frozen(settings["gravity"])
+        self.friction = settings["friction"]
+        self.energy_retention = settings["energy_retention"]
+        self.energy_correction = settings["energy_correction"]
+        self.max_angular_speed = settings["max_angular_speed"]
         self.name = str(name)
         self.description = str(description)
         self.emitter = emitter
-        self.dt = check.scalar("dt", dt, positive=True)
-        self.frames = check.positive_int("frames", frames)
-        self.max_bounces = check.positive_int("max_bounces", max_bounces)
+        self.dt = settings["dt"]
+        self.frames = settings["frames"]
+        self.max_bounces = settings["max_bounces"]
         self.source = source
 
     @classmethod
     def load(cls, name_or_path) -> Scene:
-        """A bundled scene by name (see :func:`warpsim.list_scenes`) or a TOML file by path."""
-        from .scene_files import load_scene
+        """A bundled scene by name (see :func:`warpsim.list_scenes`) or a TOML file by path.
 
-        return load_scene(name_or_path)
+        Raises:
+            warpsim.SceneFileError: (a ``ValueError``) naming the file, table, key and index.
+        """
+        return cls(**read_scene_file(name_or_path))
 
     def spawn(self, n: int | None = None, seed: int | None = None):
         """The swarm of this scene's emitter: ``n`` spheres (default: the emitter's count).
 
         Returns:
-            A :class:`warpsim.Swarm`; the same ``seed`` gives the same swarm.
+            A :class:`warpsim.Swarm`; the same ``seed`` gives the same swarm. No sphere starts
+            inside an obstacle (checked with ``warpsim.validation.check_outside``).
 
         Raises:
-            ValueError: when the scene has no emitter.
+            ValueError: when the scene has no emitter, for a bad ``n`` or ``seed``, or when the
+                emitter cannot place its spheres; for a scene read from a file, the last is a
+                :class:`warpsim.SceneFileError` whose message starts with the file's name.
         """
         if self.emitter is None:
             raise ValueError(f"scene {self.name!r} has no emitter; build a warpsim.Swarm instead")
-        return self.emitter.spawn(self.boxes, n=n, seed=seed)
+        if n is not None:
+            check.positive_int("n", n)
+        if seed is not None:
+            check.positive_int("seed", seed, minimum=0)
+        try:
+            swarm = self.emitter.spawn(self.boxes, n=n, seed=seed)
+            check.check_outside(self.boxes, swarm.position, swarm.radius, "float64")
+        except ValueError as exc:
+            if self.source is None:
+                raise
+            raise SceneFileError(f"{os.path.basename(self.source)}: {exc}") from exc
+        return swarm
 
     def __repr__(self) -> str:
         return f"Scene({self.name!r}, {len(self.boxes)} boxes)"

@@ -3,6 +3,9 @@
 The format is documented in the README ("Scene files"). In short: top-level ``name`` and
 ``description``, optional ``[simulation]`` and ``[physics]`` tables, obstacles as ``[[box]]`` and
 ``[[box_grid]]`` tables, and one ``[emitter]`` table (see :class:`warpsim.emitter.Emitter`).
+The raw values go to the same checks as the classes' arguments (:mod:`warpsim.validation`), named
+as the file names them. ``warpsim.Scene.load`` turns what :func:`read_scene_file` returns into a
+scene; this module does not import :mod:`warpsim.scene`.
 
 Every error is a :class:`SceneFileError` (a ``ValueError``) whose message starts with the file and
 names the table, key and index, e.g. ``room.toml: box[3].half_extents[1] must be >= 0, got -0.1``.
@@ -23,8 +26,7 @@ import numpy as np
 
 from . import validation as check
 from .emitter import Emitter
-from .obstacles import RoundedBoxes
-from .scene import Scene
+from .obstacles import IDENTITY_QUAT, RoundedBoxes
 
 BUNDLED_PACKAGE = "warpsim.scenes"
 SUFFIX = ".toml"
@@ -53,7 +55,7 @@ def list_scenes() -> list[tuple[str, str]]:
     """The bundled scenes, sorted by name.
 
     Returns:
-        ``(name, description)`` pairs; ``name`` is what :func:`load_scene` accepts.
+        ``(name, description)`` pairs; ``name`` is what ``warpsim.Scene.load`` accepts.
     """
     scenes = []
     for name, resource in sorted(_bundled().items()):
@@ -63,18 +65,19 @@ def list_scenes() -> list[tuple[str, str]]:
     return scenes
 
 
-def load_scene(name_or_path: str | os.PathLike) -> Scene:
-    """Read a scene: a bundled one by name (see :func:`list_scenes`) or a TOML file by path.
+def read_scene_file(name_or_path: str | os.PathLike) -> dict:
+    """Read and check a scene file: a bundled one by name (see :func:`list_scenes`) or a path.
 
     A string is taken as a path when it ends in ``.toml`` or contains a path separator;
-    otherwise it is a bundled scene's name.
+    otherwise it is a bundled scene's name. ``warpsim.Scene.load`` makes the scene.
 
     Args:
         name_or_path: e.g. ``"room"``, ``"thin-walls"``, ``"my/scene.toml"`` or a ``Path``.
 
     Returns:
-        The validated :class:`warpsim.Scene`, with ``source`` the file it was read from and
-        ``emitter`` an :class:`warpsim.emitter.Emitter`.
+        The keyword arguments of :class:`warpsim.Scene`, every value checked: ``boxes``,
+        ``emitter`` (a :class:`warpsim.Emitter`), ``name``, ``description``, ``source`` (the
+        file read) and the settings the file gives.
 
     Raises:
         SceneFileError: (a ``ValueError``) for an unknown name, a missing file, a TOML syntax
@@ -84,9 +87,7 @@ def load_scene(name_or_path: str | os.PathLike) -> Scene:
     label, stem, source, text = _locate(name_or_path)
     data = _parse_toml(label, text)
     try:
-        return _scene_from_data(data, stem=stem, source=source)
-    except SceneFileError:
-        raise
+        return _scene_arguments(data, stem=stem, source=source)
     except ValueError as exc:
         raise SceneFileError(f"{label}: {exc}") from exc
 
@@ -165,49 +166,23 @@ def _parse_toml(label: str, text: str) -> dict:
 # --- building the scene ----------------------------------------------------------------------
 
 
-def _scene_from_data(data: dict, *, stem: str, source: str) -> Scene:
+def _scene_arguments(data: dict, *, stem: str, source: str) -> dict:
+    """The keyword arguments of :class:`warpsim.Scene`, every value checked, from parsed TOML."""
     _known_keys(data, TOP_KEYS, TOP_LEVEL)
     name = _string(data, "name", stem)
     description = _string(data, "description", "")
     if "\n" in description:
         raise ValueError("description must be a single line")
-
-    settings = {}
-    simulation = _table(data, "simulation", SIMULATION_KEYS)
-    if "dt" in simulation:
-        settings["dt"] = check.scalar("simulation.dt", _numeric("simulation.dt",
-                                                                simulation["dt"]),
-                                      positive=True)
-    for key in ("frames", "max_bounces"):
-        if key in simulation:
-            settings[key] = check.positive_int(f"simulation.{key}", simulation[key])
-
-    physics = _table(data, "physics", PHYSICS_KEYS)
-    if "gravity" in physics:
-        settings["gravity"] = check.vec3("physics.gravity",
-                                         _numeric("physics.gravity", physics["gravity"]))
-    if "friction" in physics:
-        settings["friction"] = check.scalar(
-            "physics.friction", _numeric("physics.friction", physics["friction"]), minimum=0.0)
-    if "energy_retention" in physics:
-        settings["energy_retention"] = check.scalar(
-            "physics.energy_retention",
-            _numeric("physics.energy_retention", physics["energy_retention"]),
-            positive=True, maximum=1.0)
-    if "energy_correction" in physics:
-        if not isinstance(physics["energy_correction"], bool):
-            raise ValueError(f"physics.energy_correction must be true or false, got "
-                             f"{physics['energy_correction']!r}")
-        settings["energy_correction"] = physics["energy_correction"]
-    if "max_angular_speed" in physics:
-        settings["max_angular_speed"] = check.scalar(
-            "physics.max_angular_speed",
-            _numeric("physics.max_angular_speed", physics["max_angular_speed"]), positive=True)
-
+    settings = check.scene_settings(_table(data, "simulation", SIMULATION_KEYS),
+                                    where="simulation.")
+    settings.update(check.scene_settings(_table(data, "physics", PHYSICS_KEYS),
+                                         where="physics."))
     boxes = _boxes(data)
-    emitter = _emitter(data)
-    return Scene(boxes, name=name, description=description, emitter=emitter, source=source,
-                 **settings)
+    if "emitter" not in data:
+        raise ValueError("missing [emitter] table (its count is required)")
+    emitter = Emitter.from_table(_table(data, "emitter", EMITTER_KEYS), where="emitter")
+    return dict(boxes=boxes, name=name, description=description, emitter=emitter,
+                source=source, **settings)
 
 
 def _boxes(data: dict) -> RoundedBoxes:
@@ -216,8 +191,7 @@ def _boxes(data: dict) -> RoundedBoxes:
     for i, table in enumerate(_array_of_tables(data, "box")):
         where = f"box[{i}]"
         _known_keys(table, BOX_KEYS, where)
-        center = _vec3(table, where, "center")
-        half, rotation, radius = _shape(table, where)
+        center, half, rotation, radius = _shape(table, where, _require(table, where, "center"))
         parts.append((center[None], half[None], rotation[None], np.array([radius])))
     for i, table in enumerate(_array_of_tables(data, "box_grid")):
         parts.append(_grid(table, f"box_grid[{i}]"))
@@ -228,28 +202,23 @@ def _boxes(data: dict) -> RoundedBoxes:
     return RoundedBoxes(center=center, half_extents=half, rotation=rotation, radius=radius)
 
 
-def _shape(table: dict, where: str) -> tuple[np.ndarray, np.ndarray, float]:
-    """Half extents, rotation quaternion and rounding radius shared by ``[[box]]`` and grids."""
-    half = _vec3(table, where, "half_extents")
-    check.per_item(f"{where}.half_extents", half, 3, minimum=0.0)
+def _shape(table: dict, where: str, center) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """One box's checked ``(center, half_extents, rotation, radius)``, shared by ``[[box]]``
+    and grids; the rotation from ``rotation`` (a quaternion) or ``rotation_deg``."""
     if "rotation" in table and "rotation_deg" in table:
         raise ValueError(f"{where}: give either rotation (quaternion) or rotation_deg (Euler "
                          f"angles), not both")
+    rotation = table.get("rotation", IDENTITY_QUAT)
     if "rotation_deg" in table:
-        rotation = euler_deg_to_quat(_vec3(table, where, "rotation_deg"))
-    elif "rotation" in table:
-        rotation = _quaternion(f"{where}.rotation", table["rotation"])
-    else:
-        rotation = np.array([0.0, 0.0, 0.0, 1.0])
-    radius = check.scalar(f"{where}.radius", _numeric(f"{where}.radius",
-                                                      table.get("radius", 0.0)), minimum=0.0)
-    return half, rotation, radius
+        rotation = euler_deg_to_quat(check.vec3(f"{where}.rotation_deg", table["rotation_deg"]))
+    return check.rounded_box(center, _require(table, where, "half_extents"), rotation,
+                             table.get("radius", 0.0), where=f"{where}.")
 
 
 def _grid(table: dict, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The boxes of one ``[[box_grid]]``, x index fastest, then y, then z."""
     _known_keys(table, BOX_GRID_KEYS, where)
-    origin = _vec3(table, where, "origin")
+    origin = check.vec3(f"{where}.origin", _require(table, where, "origin"))
     counts = _require(table, where, "count")
     if not isinstance(counts, list) or len(counts) != 3:
         raise ValueError(f"{where}.count must be [nx, ny, nz], got {counts!r}")
@@ -257,12 +226,12 @@ def _grid(table: dict, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     if nx * ny * nz > MAX_GRID_BOXES:
         raise ValueError(f"{where}.count {counts} makes {nx * ny * nz} boxes, more than "
                          f"{MAX_GRID_BOXES}")
-    spacing = _vec3(table, where, "spacing")
-    stagger = _vec3(table, where, "stagger") if "stagger" in table else np.zeros(3)
+    spacing = check.vec3(f"{where}.spacing", _require(table, where, "spacing"))
+    stagger = check.vec3(f"{where}.stagger", table.get("stagger", (0.0, 0.0, 0.0)))
     axis = table.get("stagger_axis", "y")
     if axis not in AXES:
         raise ValueError(f"{where}.stagger_axis must be one of 'x', 'y', 'z', got {axis!r}")
-    half, rotation, radius = _shape(table, where)
+    _, half, rotation, radius = _shape(table, where, origin)
 
     iz, iy, ix = (a.reshape(-1) for a in np.indices((nz, ny, nx)))
     index = np.stack([ix, iy, iz], axis=1)
@@ -270,23 +239,6 @@ def _grid(table: dict, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     center = origin + index * spacing + odd * stagger
     m = center.shape[0]
     return center, np.tile(half, (m, 1)), np.tile(rotation, (m, 1)), np.full(m, radius)
-
-
-def _emitter(data: dict) -> Emitter:
-    if "emitter" not in data:
-        raise ValueError("missing [emitter] table (its count is required)")
-    table = _table(data, "emitter", EMITTER_KEYS)
-    if "count" not in table:
-        raise ValueError("emitter.count is required")
-    kwargs = {}
-    for key, value in table.items():
-        if key not in ("count", "seed"):  # integers: positive_int refuses floats and bools
-            _numeric(f"emitter.{key}", value)
-        kwargs[key] = value
-    try:
-        return Emitter(**kwargs)
-    except ValueError as exc:
-        raise ValueError(f"emitter.{exc}") from exc
 
 
 # --- small readers ---------------------------------------------------------------------------
@@ -340,31 +292,3 @@ def _require(table: dict, where: str, key: str):
     return table[key]
 
 
-def _numeric(name: str, value):
-    """``value`` itself when it is a number or a (nested) list of numbers.
-
-    TOML booleans would pass as 1 and 0 through numpy, and strings give a poor message, so both
-    are refused here.
-    """
-    for item in value if isinstance(value, list) else [value]:
-        if isinstance(item, list):
-            _numeric(name, item)
-        elif isinstance(item, bool) or not isinstance(item, (int, float)):
-            raise ValueError(f"{name} must be a number or a list of numbers, got {value!r}")
-    return value
-
-
-def _vec3(table: dict, where: str, key: str) -> np.ndarray:
-    name = f"{where}.{key}"
-    return check.vec3(name, _numeric(name, _require(table, where, key)))
-
-
-def _quaternion(name: str, value) -> np.ndarray:
-    """A finite, non-zero ``[x, y, z, w]`` (normalised later by :class:`RoundedBoxes`)."""
-    q = np.array(_numeric(name, value), dtype=np.float64)
-    if q.shape != (4,):
-        raise ValueError(f"{name} must be a quaternion [x, y, z, w], got {value!r}")
-    check.per_item(name, q, 4)  # finite, with the index of a bad component
-    if not np.linalg.norm(q) > 1e-12:
-        raise ValueError(f"{name} must be a non-zero quaternion [x, y, z, w], got {value!r}")
-    return q

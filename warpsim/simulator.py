@@ -11,8 +11,9 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
+from . import broad_phase as broad
 from . import validation as check
-from .device import resolve_device, use_bvh
+from .device import resolve_device
 from .kernels import precision as fp
 from .kernels.frame_kernel import frame_kernel
 from .model import DeviceState, kernel_arguments, put_model, put_spheres, put_state
@@ -99,9 +100,11 @@ class Simulator:
         max_bounces: contacts per sphere per frame, >= 1 (default: ``scene.max_bounces``).
         device: Warp device (None: Warp's default).
         precision: ``"float32"`` or ``"float64"`` kernels.
-        broad_phase: how each sphere finds its candidate boxes: ``"brute"`` tries every box,
-            ``"bvh"`` queries a BVH over the boxes' bounds (built once, here), ``"auto"`` takes
-            the BVH from ``warpsim.device.BVH_MIN_BOXES`` boxes on. Bit-identical results;
+        broad_phase: how each sphere finds its candidate boxes (see
+            :mod:`warpsim.broad_phase`): ``"brute"`` tries every box, ``"bvh"`` queries a BVH
+            over the boxes' bounds, ``"grid"`` reads the list of a uniform grid's cell when the
+            frame's path stays near that cell (else every box, or the BVH for many boxes),
+            ``"auto"`` picks by a measured cost model. Bit-identical results;
             :attr:`broad_phase` says which one runs.
         workers: on the CPU device, the swarm is split into this many contiguous shards, each
             launched from its own thread (Warp runs one CPU launch on one core and releases the
@@ -109,7 +112,8 @@ class Simulator:
             bit-identical whatever the number. On a CUDA device one launch covers the swarm.
 
     Attributes:
-        broad_phase: ``"bvh"`` or ``"brute"``, the broad phase compiled into the kernel.
+        broad_phase: the broad phase compiled into the kernel: ``"brute"``, ``"bvh"``,
+            ``"grid"`` or ``"grid-bvh"`` (a grid falling back to the BVH).
 
     Raises:
         ValueError: a bad argument, naming it.
@@ -124,10 +128,17 @@ class Simulator:
             raise ValueError(f"swarm must be a warpsim.Swarm, got {type(swarm).__name__}")
         self.scene = scene
         self.dt = check.scalar("dt", scene.dt if dt is None else dt, positive=True)
-        self.max_bounces = check.positive_int(
-            "max_bounces", scene.max_bounces if max_bounces is None else max_bounces)
+        self.max_bounces = check.bounce_cap(
+            scene.max_bounces if max_bounces is None else max_bounces)
         self.precision = check.precision(precision)
-        self.broad_phase = "bvh" if use_bvh(broad_phase, len(scene.boxes)) else "brute"
+        # everything a run needs, checked before anything is uploaded or compiled
+        self.warnings = check.check_run(scene, swarm, self.dt, self.precision,
+                                        self.max_bounces)
+        """Texts of the :class:`warpsim.validation.PrecisionWarning` s this set-up raised."""
+        check.check_outside(scene.boxes, swarm.position, swarm.radius, self.precision)
+        reach = broad.reach(swarm.position, swarm.velocity, swarm.radius, scene.gravity, self.dt)
+        dtype = fp.precision(self.precision).np_dtype
+        self.broad_phase, self._grid = broad.choose(broad_phase, scene.boxes, reach, dtype)
         self.device = resolve_device(device)
         self.workers = _workers(workers, self.device, len(swarm))
         """Threads that launch the frame kernel, each on a contiguous shard of the swarm."""
@@ -141,7 +152,7 @@ class Simulator:
         self._seconds = 0.0
         self._kernel = frame_kernel(self.precision, self.max_bounces, self.spin,
                                     scene.energy_correction, scene.energy_retention < 1.0,
-                                    self.broad_phase == "bvh")
+                                    self.broad_phase)
         self._upload(swarm)
         self._shards = _shards(self._n, self.workers)
         self._executor = None
@@ -158,7 +169,8 @@ class Simulator:
         energy = self._energy_of(swarm.position.astype(p.np_dtype).astype(np.float64),
                                  swarm.velocity.astype(p.np_dtype).astype(np.float64))
         self._p = p
-        self.model = put_model(scene.boxes, p, dev, bvh=self.broad_phase == "bvh", dt=self.dt,
+        self.model = put_model(scene.boxes, p, dev, broad_phase=self.broad_phase,
+                               grid=self._grid, dt=self.dt,
                                gravity=scene.gravity, origin=self.energy_origin,
                                friction=scene.friction,
                                max_angular_speed=scene.max_angular_speed,

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-@dataclass
+@dataclass(repr=False)
 class Trajectory:
     """Frames recorded by :meth:`warpsim.Simulator.run` (or read back from USD).
 
@@ -18,6 +18,13 @@ class Trajectory:
         position: sphere centres [m], shape (F, N, 3).
         orientation: unit quaternions (x, y, z, w), body -> world, shape (F, N, 4).
         radius: sphere radii [m], shape (N,).
+        velocity: the true velocity of each sphere at each recorded frame [m/s], shape (F, N, 3)
+            (after any bounce in that frame, not a difference of positions), or None when not
+            recorded (``Simulator.run(..., velocities=True)`` records it).
+        angular_velocity: world-frame angular velocity at each recorded frame [rad/s], shape
+            (F, N, 3), or None when not recorded.
+        events: the contacts of the run (:class:`warpsim.events.ContactEvents`), or None when
+            not recorded (``Simulator.run(..., events=True)``).
     """
 
     frame: np.ndarray
@@ -25,6 +32,9 @@ class Trajectory:
     position: np.ndarray
     orientation: np.ndarray
     radius: np.ndarray
+    velocity: np.ndarray | None = None
+    angular_velocity: np.ndarray | None = None
+    events: object | None = None
 
     @property
     def time(self) -> np.ndarray:
@@ -42,10 +52,28 @@ class Trajectory:
     def sphere_count(self) -> int:
         return int(self.position.shape[1])
 
+    def __repr__(self) -> str:
+        n_frames = len(self)
+        if n_frames:
+            span = f"frames {int(self.frame[0])}..{int(self.frame[-1])}"
+        else:
+            span = "no frames"
+        extras = [name for name in ("velocity", "angular_velocity", "events")
+                  if getattr(self, name) is not None]
+        with_ = f", with {', '.join(extras)}" if extras else ""
+        return (f"Trajectory({n_frames} records x {self.sphere_count} spheres, {span}, "
+                f"dt={self.dt!r} s, {self.position.dtype}{with_})")
+
     def subset(self, spheres) -> Trajectory:
-        """The same frames for the spheres at the given indices (a copy)."""
+        """The same frames for the spheres at the given indices (a copy; events are kept whole,
+        their sphere indices stay those of the full swarm)."""
         idx = np.asarray(spheres, dtype=np.int64)
+
+        def pick(values):
+            return None if values is None else values[:, idx].copy()
+
         return Trajectory(frame=self.frame.copy(), dt=self.dt,
                           position=self.position[:, idx].copy(),
                           orientation=self.orientation[:, idx].copy(),
-                          radius=self.radius[idx].copy())
+                          radius=self.radius[idx].copy(), velocity=pick(self.velocity),
+                          angular_velocity=pick(self.angular_velocity), events=self.events)

@@ -1,0 +1,238 @@
+"""The nearest contact of a parabolic arc over a group of rounded boxes, in world coordinates.
+
+The ballistic counterpart of :mod:`nearest`, with the same box arrays (``# Model`` data: centre,
+rotation matrix local -> world, core half extents, rounding radius, world-AABB half size) and the
+same structure: :func:`sweep_box_world_arc` is the per-candidate step (a cheap reject, then the
+exact sweep in the box's frame), :func:`nearest_hit_arc` feeds it every box and
+:func:`nearest_hit_arc_bvh` the boxes a BVH query returns; the two are bit-identical.
+
+Over ``[0, tau]`` the arc ``x(s) = a + v s + 1/2 g s^2`` departs from its chord
+``a -> a + v tau + 1/2 g tau^2`` by ``1/2 g s (tau - s)``: at most the sagitta
+``|g_i| tau^2 / 8`` along each world axis. The reject and the BVH query are the linear ones for
+the chord, grown by that per-axis sagitta, so they stay conservative for the arc.
+"""
+
+
+from functools import cache
+from types import SimpleNamespace
+
+import warp as wp
+
+from .arc import arc_funcs
+from .nearest import BOUNDS_PAD_ABS, BOUNDS_PAD_REL, REJECT_SLACK, nearest_funcs
+from .precision import Precision
+
+wp.set_module_options({"enable_backward": False})
+
+#: A contact centre on the arc carries rounding of a few ulps of its coordinates, the chord and
+#: the box's size; when the Minkowski radius is below this many of those ulps (a point against a
+#: sharp box or a zero-thickness plate) that rounding could put it behind the surface it hit, so
+#: it is moved out along the normal by that many ulps (as the linear model does).
+SEPARATION_ULPS = 16.0
+
+
+@cache
+def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
+    """Build the group-query ``@wp.func``s for arcs, for one precision.
+
+    Returns:
+        Namespace with ``sweep_box_world_arc``, ``nearest_hit_arc``, ``nearest_hit_arc_bvh``
+        and ``arc_contact_centre``.
+    """
+    scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
+    arc = arc_funcs(p)
+    sweep_rounded_box_arc = arc.sweep_rounded_box_arc
+    arc_point = arc.arc_point
+    sweep_box_world = nearest_funcs(p).sweep_box_world
+    ZERO = scalar(0.0)
+    HALF = scalar(0.5)
+    EIGHTH = scalar(0.125)
+    SLACK = scalar(1.0 + REJECT_SLACK)
+    PAD_REL = scalar(BOUNDS_PAD_REL)
+    PAD_ABS = scalar(BOUNDS_PAD_ABS)
+    SEPARATION = scalar(SEPARATION_ULPS * p.eps)
+
+    @wp.func
+    def is_zero(x: vec3):
+        return x[0] == ZERO and x[1] == ZERO and x[2] == ZERO
+
+    @wp.func
+    def inf_norm(x: vec3):
+        return wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2]))
+
+    @wp.func
+    def sagitta(g: vec3, tau: scalar):
+        """Per-axis bound [m] on the arc's distance from its chord over ``[0, tau]``."""
+        k = EIGHTH * tau * tau
+        return vec3(wp.abs(g[0]) * k, wp.abs(g[1]) * k, wp.abs(g[2]) * k)
+
+    @wp.func
+    def sweep_box_world_arc(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, center: vec3,
+                            rotation: mat33, half_extents: vec3, box_radius: scalar,
+                            extent: vec3):
+        """Sweep of a sphere (centre on the arc from ``a``, radius ``r``) against one box.
+
+        Args:
+            a: centre at ``s = 0`` [m], world. v: velocity at ``s = 0`` [m/s]. g: acceleration
+            [m/s^2]. tau: time span [s]. r: sphere radius [m]. center, rotation, half_extents,
+            box_radius, extent: the box (see :mod:`nearest`).
+
+        A cheap conservative reject first: no hit when the chord's world bounding box, grown by
+        the sagitta and ``r``, and the box's are apart along an axis. Otherwise the exact sweep
+        in the box's frame. ``g = 0`` is :func:`nearest.sweep_box_world` of the chord, bit for
+        bit (``s = t tau``).
+
+        Returns:
+            ``(hit, s, normal)`` with the normal in world coordinates (``sweep_rounded_box_arc``).
+        """
+        hit = int(0)
+        s = tau
+        normal = vec3(ZERO, ZERO, ZERO)
+        if is_zero(g):
+            hit_l, t_l, n_l = sweep_box_world(a, v * tau, r, center, rotation, half_extents,
+                                              box_radius, extent)
+            if hit_l == 1:
+                hit = 1
+                s = t_l * tau
+                normal = n_l
+        else:
+            d = tau * (v + (HALF * tau) * g)
+            sag = sagitta(g, tau)
+            mid = a + HALF * d - center
+            apart = int(0)
+            for i in range(3):
+                if wp.abs(mid[i]) > (extent[i] + r + sag[i]) * SLACK + HALF * wp.abs(d[i]):
+                    apart = 1
+            if apart == 0:
+                to_local = wp.transpose(rotation)
+                hit, s, n_local = sweep_rounded_box_arc(to_local * (a - center), to_local * v,
+                                                        to_local * g, tau, half_extents,
+                                                        box_radius + r)
+                normal = rotation * n_local
+        return hit, s, normal
+
+    @wp.func
+    def nearest_hit_arc(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar,
+                        box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
+                        box_half_extents: wp.array(dtype=vec3),
+                        box_radius: wp.array(dtype=scalar), box_extent: wp.array(dtype=vec3)):
+        """The first contact of the arc over all boxes (smallest ``s``; ties: the lower index).
+
+        Returns:
+            ``(box, s, normal)``: ``box`` is -1 when nothing is hit (then ``s = tau``, normal 0).
+        """
+        best = int(-1)
+        best_s = tau
+        best_n = vec3(ZERO, ZERO, ZERO)
+        for k in range(box_center.shape[0]):
+            hit, s, normal = sweep_box_world_arc(a, v, g, tau, r, box_center[k], box_rotation[k],
+                                                 box_half_extents[k], box_radius[k],
+                                                 box_extent[k])
+            if hit == 1 and (best < 0 or s < best_s):
+                best = k
+                best_s = s
+                best_n = normal
+        return best, best_s, best_n
+
+    @wp.func
+    def nearest_hit_arc_bvh(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, bvh_id: wp.uint64,
+                            box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
+                            box_half_extents: wp.array(dtype=vec3),
+                            box_radius: wp.array(dtype=scalar), box_extent: wp.array(dtype=vec3)):
+        """:func:`nearest_hit_arc` over the boxes a BVH query returns (bit-identical to it).
+
+        ``bvh_id`` is the BVH of :func:`nearest.nearest_hit_bvh` (the boxes' reject bounds). The
+        query box is the chord's world bounding box grown by ``(r + sagitta) (1 + REJECT_SLACK)``
+        per axis and padded as the linear query, in float32 rounded outward: every box the
+        per-box reject lets through is a candidate. ``bvh_id = 0`` (no boxes) hits nothing.
+
+        Returns:
+            ``(box, s, normal)``: ``box`` is -1 when nothing is hit (then ``s = tau``, normal 0).
+        """
+        best = int(-1)
+        best_s = tau
+        best_n = vec3(ZERO, ZERO, ZERO)
+        if bvh_id != wp.uint64(0):
+            d = tau * (v + (HALF * tau) * g)
+            if is_zero(g):
+                d = v * tau
+            b = a + d
+            sag = sagitta(g, tau)
+            lower = wp.vec3f()
+            upper = wp.vec3f()
+            for i in range(3):
+                grow = (r + sag[i]) * SLACK
+                lo = wp.min(a[i], b[i]) - grow
+                hi = wp.max(a[i], b[i]) + grow
+                pad = PAD_REL * wp.max(wp.abs(lo), wp.abs(hi)) + PAD_ABS
+                lower[i] = wp.float32(lo - pad)
+                upper[i] = wp.float32(hi + pad)
+            query = wp.bvh_query_aabb(bvh_id, lower, upper)
+            k = int(0)
+            while wp.bvh_query_next(query, k):
+                hit, s, normal = sweep_box_world_arc(a, v, g, tau, r, box_center[k],
+                                                     box_rotation[k], box_half_extents[k],
+                                                     box_radius[k], box_extent[k])
+                if hit == 1 and (best < 0 or s < best_s or (s == best_s and k < best)):
+                    best = k
+                    best_s = s
+                    best_n = normal
+        return best, best_s, best_n
+
+    @wp.func
+    def arc_contact_centre(a: vec3, v: vec3, g: vec3, s: scalar, normal: vec3, big_r: scalar,
+                           extent: vec3):
+        """The centre on the arc at a contact, kept on the side the sphere came from.
+
+        When the Minkowski radius ``big_r`` is below ``SEPARATION_ULPS`` ulps of the scale of
+        the computation (the contact's coordinates, the displacement, the box's size) it is
+        moved out along the unit ``normal`` by that many ulps; else it is ``x(s)`` bit for bit.
+        """
+        contact = arc_point(a, v, g, s)
+        lift = SEPARATION * wp.max(wp.max(inf_norm(contact), inf_norm(contact - a)),
+                                   inf_norm(extent))
+        if big_r < lift:
+            contact = contact + lift * normal
+        return contact
+
+    return SimpleNamespace(sweep_box_world_arc=sweep_box_world_arc,
+                           nearest_hit_arc=nearest_hit_arc,
+                           nearest_hit_arc_bvh=nearest_hit_arc_bvh,
+                           arc_contact_centre=arc_contact_centre)
+
+
+@cache
+def model_nearest_hit_arc(p: Precision, broad_phase: bool):
+    """The arc's nearest-hit ``@wp.func`` the kernels call, with the kernels' ``# Model`` arguments.
+
+    Args:
+        p: precision.
+        broad_phase: compile the BVH query (:func:`nearest_hit_arc_bvh`, ``box_bvh`` read)
+            instead of the loop over all boxes (``box_bvh`` unused).
+
+    Returns:
+        ``nearest_hit_arc_model(a, v, g, tau, r, box_center, box_rotation, box_half_extents,
+        box_radius, box_extent, box_bvh) -> (box, s, normal)``.
+    """
+    scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
+    funcs = nearest_arc_funcs(p)
+    nearest_hit_arc, nearest_hit_arc_bvh = funcs.nearest_hit_arc, funcs.nearest_hit_arc_bvh
+
+    @wp.func
+    def nearest_hit_arc_model(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar,
+                              box_center: wp.array(dtype=vec3),
+                              box_rotation: wp.array(dtype=mat33),
+                              box_half_extents: wp.array(dtype=vec3),
+                              box_radius: wp.array(dtype=scalar),
+                              box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64):
+        """First contact of the sphere's arc over the boxes, by the broad phase compiled in."""
+        if wp.static(broad_phase):
+            box, s, normal = nearest_hit_arc_bvh(a, v, g, tau, r, box_bvh, box_center,
+                                                 box_rotation, box_half_extents, box_radius,
+                                                 box_extent)
+        else:
+            box, s, normal = nearest_hit_arc(a, v, g, tau, r, box_center, box_rotation,
+                                             box_half_extents, box_radius, box_extent)
+        return box, s, normal
+
+    return nearest_hit_arc_model
