@@ -43,7 +43,7 @@ RESTING_GAP_ULPS = 16.0
 
 @cache
 def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
-                 broad_phase: str) -> SimpleNamespace:
+                 broad_phase: str, events: bool = False) -> SimpleNamespace:
     """Build the bounce loop for one precision and one feature set.
 
     Args:
@@ -53,9 +53,16 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
             untouched and no spin code is compiled).
         lossy: apply ``energy_retention`` at each bounce (else no loss code is compiled).
         broad_phase: one of ``nearest.BROAD_PHASES`` (bit-identical results).
+        events: write one row per contact into the event buffer (else no event code).
 
     Returns:
         Namespace with ``bounce_path``.
+
+    Event buffer (see :func:`write_event`): ``event_count_out[0]`` counts every contact of the
+    launch (the rows past the buffer's capacity are dropped, never written), row ``j`` of
+    ``event_index_out`` (C, 4) is ``(frame, sphere, box, resting)``, of ``event_vector_out`` (C,
+    2) ``(contact centre [m], normal)``, of ``event_scalar_out`` (C, 2) ``(fraction of the
+    frame's path, normal speed before the contact [m/s])``.
     """
     scalar, vec3 = p.scalar, p.vec3
     nearest_hit = model_nearest_hit(p, broad_phase)
@@ -100,6 +107,24 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
         return out
 
     @wp.func
+    def write_event(frame: int, sphere: int, box: int, resting: int, contact: vec3, n: vec3,
+                    fraction: scalar, speed: scalar, event_count_out: wp.array(dtype=wp.int32),
+                    event_index_out: wp.array2d(dtype=wp.int32),
+                    event_vector_out: wp.array2d(dtype=vec3),
+                    event_scalar_out: wp.array2d(dtype=scalar)):
+        """Append one contact to the launch's event buffer (counted even when it is full)."""
+        row = wp.atomic_add(event_count_out, 0, 1)
+        if row < event_index_out.shape[0]:
+            event_index_out[row, 0] = frame
+            event_index_out[row, 1] = sphere
+            event_index_out[row, 2] = box
+            event_index_out[row, 3] = resting
+            event_vector_out[row, 0] = contact
+            event_vector_out[row, 1] = n
+            event_scalar_out[row, 0] = fraction
+            event_scalar_out[row, 1] = speed
+
+    @wp.func
     def bounce_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
                     g: vec3, origin: vec3, dt: scalar, friction: scalar, max_rot: scalar,
                     retention: scalar,
@@ -109,7 +134,11 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                     box_bvh: wp.uint64,
                     grid_lower: vec3, grid_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
                     grid_cell_start: wp.array(dtype=wp.int32),
-                    grid_cell_boxes: wp.array(dtype=wp.int32)):
+                    grid_cell_boxes: wp.array(dtype=wp.int32), frame: int, sphere: int,
+                    event_count_out: wp.array(dtype=wp.int32),
+                    event_index_out: wp.array2d(dtype=wp.int32),
+                    event_vector_out: wp.array2d(dtype=vec3),
+                    event_scalar_out: wp.array2d(dtype=scalar)):
         """Move a sphere for one frame among the boxes, bouncing up to ``MAX_BOUNCES`` times.
 
         Args:
@@ -119,7 +148,9 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
             potential). origin: potential reference point [m]. dt: frame duration [s].
             friction: ``k_f`` [kg/s]. max_rot: ``|Rot|`` clamp [rad/s]. retention: kept
             fraction of kinetic energy per bounce. box_*: the obstacles (see ``nearest``);
-            ``box_bvh`` and ``grid_*``: the broad phase's data (see ``nearest``).
+            ``box_bvh`` and ``grid_*``: the broad phase's data (see ``nearest``). frame,
+            sphere: what an event row names (frame within the launch, sphere index).
+            event_*: the event buffer (written only when built with ``events``).
 
         Returns:
             ``(position, velocity, L, energy, bounces, capped, supported)``: ``bounces`` counts
@@ -131,6 +162,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
         capped = int(0)
         supported = int(0)
         done = int(0)
+        travelled = ZERO  # fraction of the frame's path behind the sphere
         while done == 0:
             box, t, n = nearest_hit(a, d, r, box_center, box_rotation, box_half_extents,
                                     box_radius, box_extent, box_bvh, grid_lower, grid_cell,
@@ -149,10 +181,15 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                 vn = wp.dot(v, n)
                 dn = wp.dot(d, n)
                 resting = -vn <= REST * wp.max(-wp.dot(g, n), ZERO) * dt
+                travelled = travelled + (ONE - travelled) * t
                 if wp.static(not lossy):  # elastic: a support touches at the frame's start
                     gap = t * -dn
                     scale = wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))
                     resting = resting and gap <= GAP_ULPS * (scale + wp.length(d))
+                if wp.static(events):
+                    write_event(frame, sphere, box, int(resting), contact, n, travelled, -vn,
+                                event_count_out, event_index_out, event_vector_out,
+                                event_scalar_out)
                 if resting:
                     supported = 1
                     v = v - vn * n

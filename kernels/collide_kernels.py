@@ -131,6 +131,10 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         position_out: wp.array(dtype=vec3),
         velocity_out: wp.array(dtype=vec3),
         angular_momentum_out: wp.array(dtype=vec3),
+        event_count_out: wp.array(dtype=wp.int32),
+        event_index_out: wp.array2d(dtype=wp.int32),
+        event_vector_out: wp.array2d(dtype=vec3),
+        event_scalar_out: wp.array2d(dtype=scalar),
     ):
         i = wp.tid()
         v = velocity_in[i]
@@ -140,7 +144,8 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
             position_in[i], v, radius[i], m, angular_momentum_in[i], kinetic_energy(m, v),
             zero, zero, dt, friction, max_rot, retention,
             box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
-            grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes)
+            grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes,
+            0, i, event_count_out, event_index_out, event_vector_out, event_scalar_out)
         bounces_out[i] = bounces
         capped_out[i] = capped
         position_out[i] = x

@@ -28,7 +28,7 @@ from .variant import variant_kernel
 
 @cache
 def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_correction: bool,
-                 lossy: bool, broad_phase: str):
+                 lossy: bool, broad_phase: str, events: bool = False):
     """Build the frame kernel for one feature set.
 
     One thread per sphere advances it by ``frame_count`` frames with its state in registers,
@@ -47,6 +47,8 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         lossy: ``energy_retention < 1``.
         broad_phase: how each sphere finds its candidate boxes, one of
             ``nearest.BROAD_PHASES``; the results are bit-identical whichever it is.
+        events: write every contact into the launch's event buffer (``bounce.bounce_funcs``);
+            without it no event code is compiled and the buffer is not touched.
 
     Kernel parameters beyond the model, the sphere constants and the state:
         frame_count: frames this launch advances (>= 0).
@@ -55,10 +57,13 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         record_velocity_out, record_angular_velocity_out: (records, N) true velocity at the
             recorded frame [m/s] (``v + g dt / 2``) and world angular velocity ``Rot`` [rad/s];
             written only when the arrays have rows (a (0, N) array skips them).
+        sphere_offset: index of the launch's first sphere in the swarm (event rows name it).
+        event_count_out, event_index_out, event_vector_out, event_scalar_out: the event buffer;
+            an event's frame is the frame within the launch, from 1.
     """
     p = precision(precision_name)
     scalar, vec3, mat33, quat = p.scalar, p.vec3, p.mat33, p.quat
-    bounce_path = bounce_funcs(p, max_bounces, spin, lossy, broad_phase).bounce_path
+    bounce_path = bounce_funcs(p, max_bounces, spin, lossy, broad_phase, events).bounce_path
     dyn = dynamics_funcs(p)
     energy_along_gravity = dyn.energy_along_gravity
     kinetic_energy = dyn.kinetic_energy
@@ -79,13 +84,18 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
                      box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64,
                      grid_lower: vec3, grid_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
                      grid_cell_start: wp.array(dtype=wp.int32),
-                     grid_cell_boxes: wp.array(dtype=wp.int32)):
+                     grid_cell_boxes: wp.array(dtype=wp.int32), frame: int, sphere: int,
+                     event_count_out: wp.array(dtype=wp.int32),
+                     event_index_out: wp.array2d(dtype=wp.int32),
+                     event_vector_out: wp.array2d(dtype=vec3),
+                     event_scalar_out: wp.array2d(dtype=scalar)):
         """One frame of the linear (chord) model; returns the state and the frame's counts."""
         v = v + gravity * dt
         x, v, L, energy, bounces, capped, supported = bounce_path(
             x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention,
             box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
-            grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes)
+            grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes,
+            frame, sphere, event_count_out, event_index_out, event_vector_out, event_scalar_out)
         # The energy is that of the velocity at the frame's end, v + g dt / 2 (the stored v is
         # semi-implicit Euler's step velocity): semi-implicit Euler keeps that energy exactly
         # in free flight, so the reset changes nothing there and only removes drift.
@@ -142,6 +152,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         mass: wp.array(dtype=scalar),
         frame_count: int,
         record_every: int,
+        sphere_offset: int,
         # In:
         position_in: wp.array(dtype=vec3),
         velocity_in: wp.array(dtype=vec3),
@@ -160,8 +171,13 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         record_orientation_out: wp.array2d(dtype=quat),
         record_velocity_out: wp.array2d(dtype=vec3),
         record_angular_velocity_out: wp.array2d(dtype=vec3),
+        event_count_out: wp.array(dtype=wp.int32),
+        event_index_out: wp.array2d(dtype=wp.int32),
+        event_vector_out: wp.array2d(dtype=vec3),
+        event_scalar_out: wp.array2d(dtype=scalar),
     ):
         i = wp.tid()
+        sphere = sphere_offset + i
         r = radius[i]
         m = mass[i]
         x = position_in[i]
@@ -181,7 +197,9 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
             x, v, L, o, energy, b, c = linear_frame(
                 x, v, L, o, energy, r, m, gravity, origin, dt, friction, max_rot, retention,
                 box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
-                grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes)
+                grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes,
+                f + 1, sphere, event_count_out, event_index_out, event_vector_out,
+                event_scalar_out)
             bounces += b
             capped += c
             if record_every > 0:

@@ -12,7 +12,7 @@ from . import validation as check
 from .device import resolve_device
 from .kernels import precision as fp
 from .kernels.collide_kernels import bounce_kernel, collide_kernel
-from .model import Spheres, launch, put_model, to_device
+from .model import Spheres, event_buffer, launch, put_model, to_device
 from .obstacles import RoundedBox, RoundedBoxes
 from .swarm import Swarm
 
@@ -192,7 +192,8 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
            "capped_out": wp.empty(n, dtype=wp.int32, device=dev)}
     for name in ("position_out", "velocity_out", "angular_momentum_out"):
         out[name] = wp.empty(n, dtype=p.vec3, device=dev)
-    launch(kernel, n, dev, model=model, spheres=spheres, state_in=state, outputs=out)
+    launch(kernel, n, dev, model=model, spheres=spheres, state_in=state, outputs=out,
+           launch_outputs=event_buffer(p, dev, 0))
     bounces, capped = out["bounces_out"], out["capped_out"]
     outs = [out["position_out"], out["velocity_out"], out["angular_momentum_out"]]
     b = bounces.numpy()

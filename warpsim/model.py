@@ -211,6 +211,16 @@ def put_state(p: Precision, device, *, position, velocity, energy, angular_momen
                        orientation=to_device(orientation, p.quat, p, device))
 
 
+def event_buffer(p: Precision, device, capacity: int) -> dict:
+    """An empty event buffer of ``capacity`` rows for one launch (``kernels.bounce``): the
+    kernels' ``event_*_out`` arrays by name; capacity 0 is the buffer of launches without
+    events (never written)."""
+    return {"event_count_out": wp.zeros(1, dtype=wp.int32, device=device),
+            "event_index_out": wp.empty((capacity, 4), dtype=wp.int32, device=device),
+            "event_vector_out": wp.empty((capacity, 2), dtype=p.vec3, device=device),
+            "event_scalar_out": wp.empty((capacity, 2), dtype=p.scalar, device=device)}
+
+
 def parameter_names(kernel) -> list[str]:
     """The parameter names of a Warp kernel, in order."""
     return [arg.label for arg in kernel.adj.args]
@@ -227,7 +237,7 @@ def _field(source, name: str):
 
 def kernel_arguments(kernel, *, model: Model | None = None, spheres: Spheres | None = None,
                      state_in: DeviceState | None = None, state_out: DeviceState | None = None,
-                     outputs=None, values: dict | None = None,
+                     outputs=None, launch_outputs=None, values: dict | None = None,
                      rows: slice | None = None) -> list:
     """A launch's arguments for ``kernel``, each looked up by its parameter's name.
 
@@ -235,13 +245,16 @@ def kernel_arguments(kernel, *, model: Model | None = None, spheres: Spheres | N
 
     - ``<field>_in``: ``state_in.<field>``;
     - ``<field>_out``: ``state_out.<field>`` when the state has that field, else
-      ``outputs[name]`` (a dict or an object with that attribute: counters, query results);
+      ``outputs[name]`` (a dict or an object with that attribute: per-sphere counters, query
+      results), else ``launch_outputs[name]`` (outputs of the whole launch, never sliced: an
+      event buffer and its counter);
     - any other name: ``model.<name>``, else ``spheres.<name>``, else ``values[name]`` (plain
       per-launch values such as a frame count).
 
     Args:
         kernel: a Warp kernel of this package.
-        model, spheres, state_in, state_out, outputs, values: the sources above.
+        model, spheres, state_in, state_out, outputs, launch_outputs, values: the sources
+            above.
         rows: a slice of the spheres: every per-sphere array (of ``spheres``, the states and
             ``outputs``) is passed as that slice (a view, no copy); a 2-D per-sphere output
             (frames, N) is sliced along its second axis. The model is passed whole.
@@ -265,6 +278,9 @@ def kernel_arguments(kernel, *, model: Model | None = None, spheres: Spheres | N
             if value is None:
                 value = _field(outputs, name)
                 where = "outputs"
+            if value is None:
+                value = _field(launch_outputs, name)
+                per_sphere = False
         else:
             found = [(src, v) for src, v in (("model", _field(model, name)),
                                              ("spheres", _field(spheres, name)),
@@ -290,5 +306,5 @@ def launch(kernel, dim: int, device, **sources) -> None:
     wp.launch(kernel, dim=dim, device=device, inputs=kernel_arguments(kernel, **sources))
 
 
-__all__ = ["DeviceState", "Model", "Spheres", "kernel_arguments", "launch", "parameter_names",
-           "put_model", "put_spheres", "put_state", "to_device"]
+__all__ = ["DeviceState", "Model", "Spheres", "event_buffer", "kernel_arguments", "launch",
+           "parameter_names", "put_model", "put_spheres", "put_state", "to_device"]

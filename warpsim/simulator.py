@@ -16,7 +16,7 @@ from . import validation as check
 from .device import resolve_device
 from .kernels import precision as fp
 from .kernels.frame_kernel import frame_kernel
-from .model import DeviceState, kernel_arguments, put_model, put_spheres, put_state
+from .model import event_buffer, kernel_arguments, put_model, put_spheres, put_state
 from .scene import Scene
 from .swarm import Swarm
 from .trajectory import Trajectory
@@ -74,6 +74,10 @@ class Stats:
 #: second on one CPU core, so that progress is reported and Ctrl-C is honoured promptly, while
 #: the launch overhead stays far below the work (one launch per frame costs about 10 us).
 LAUNCH_SPHERE_FRAMES = 1 << 22
+
+#: Event rows per shard and launch by default (about 48 MB of float32 buffer): room for every
+#: contact of the bundled scenes' default runs; more are counted as dropped, never lost silently.
+DEFAULT_EVENT_CAPACITY = 1 << 20
 
 #: Shards smaller than this many spheres are not worth a thread of their own: below it the
 #: launch and thread hand-off cost more than the shard's work at one frame per launch.
@@ -150,13 +154,14 @@ class Simulator:
         self.mass = swarm.mass.copy()
         """Sphere masses [kg], (N,), float64."""
         self._seconds = 0.0
-        self._kernel = frame_kernel(self.precision, self.max_bounces, self.spin,
-                                    scene.energy_correction, scene.energy_retention < 1.0,
-                                    self.broad_phase)
+        self._features = (self.precision, self.max_bounces, self.spin, scene.energy_correction,
+                          scene.energy_retention < 1.0, self.broad_phase)
+        self._kernel = frame_kernel(*self._features)
         self._upload(swarm)
         self._shards = _shards(self._n, self.workers)
         self._executor = None
         self._no_records = self._records(0, False)
+        self._no_events = event_buffer(self._p, self.device, 0)
 
     # -- set-up -------------------------------------------------------------------------------
 
@@ -191,11 +196,13 @@ class Simulator:
         """Per-sphere counters the kernel adds to (contacts taken, sphere-frames capped)."""
         self._initial_energy = energy
 
-    def _arguments(self, state_in: DeviceState, state_out: DeviceState, rows: slice,
-                   values: dict, records: dict) -> list:
-        return kernel_arguments(self._kernel, model=self.model, spheres=self.spheres,
-                                state_in=state_in, state_out=state_out,
-                                outputs={**self.counters, **records}, values=values, rows=rows)
+    def _arguments(self, kernel, rows: slice | None, values: dict, records: dict,
+                   events: dict) -> list:
+        offset = 0 if rows is None else rows.start
+        return kernel_arguments(kernel, model=self.model, spheres=self.spheres,
+                                state_in=self.state_0, state_out=self.state_1,
+                                outputs={**self.counters, **records}, launch_outputs=events,
+                                values={**values, "sphere_offset": offset}, rows=rows)
 
     def _records(self, rows: int, motion: bool) -> dict:
         """Device arrays the kernel writes ``rows`` recorded frames into, (rows, N) each; the
@@ -220,20 +227,25 @@ class Simulator:
         wp.load_module(self._kernel.module, device=self.device)
         return time.perf_counter() - start
 
-    def _launch(self, frames: int, every: int = 0, records: dict | None = None) -> None:
+    def _launch(self, frames: int, every: int = 0, records: dict | None = None,
+                events: list[dict] | None = None) -> None:
         """Advance ``frames`` frames in one launch per shard (all shards at once); with
-        ``every > 0`` the kernel writes its recorded frames into ``records``."""
+        ``every > 0`` the kernel writes its recorded frames into ``records``; with ``events``
+        (one event buffer per shard, :func:`warpsim.model.event_buffer`) it writes the contacts
+        there, with a kernel variant that has the event code."""
         if records is None:
             records = self._no_records
+        kernel = self._kernel if events is None else frame_kernel(*self._features, events=True)
         values = {"frame_count": int(frames), "record_every": int(every)}
         shards = self._shards if len(self._shards) > 1 else [None]
-        calls = [self._arguments(self.state_0, self.state_1, rows, values, records)
-                 for rows in shards]
+        buffers = events if events is not None else [self._no_events] * len(shards)
+        calls = [self._arguments(kernel, rows, values, records, buffer)
+                 for rows, buffer in zip(shards, buffers, strict=True)]
         if len(calls) == 1:
-            wp.launch(self._kernel, dim=self._n, device=self.device, inputs=calls[0])
+            wp.launch(kernel, dim=self._n, device=self.device, inputs=calls[0])
         else:
             pool = self._pool()
-            futures = [pool.submit(wp.launch, self._kernel, dim=rows.stop - rows.start,
+            futures = [pool.submit(wp.launch, kernel, dim=rows.stop - rows.start,
                                    device=self.device, inputs=args)
                        for rows, args in zip(self._shards, calls, strict=True)]
             for future in futures:
@@ -267,7 +279,8 @@ class Simulator:
         self._seconds += time.perf_counter() - start
 
     def run(self, frames: int, every: int = 1, progress: bool = False,
-            velocities: bool = False) -> Trajectory:
+            velocities: bool = False, events: bool = False,
+            event_capacity: int = DEFAULT_EVENT_CAPACITY) -> Trajectory:
         """Advance ``frames`` frames, recording the current state and every ``every``-th frame.
 
         The kernel writes the recorded frames itself; one launch covers many of them.
@@ -279,14 +292,24 @@ class Simulator:
             velocities: also record each sphere's true velocity [m/s] and angular velocity
                 [rad/s] at the recorded frames (``Trajectory.velocity`` and
                 ``angular_velocity``).
+            events: also record every contact (``Trajectory.events``, a
+                :class:`warpsim.events.ContactEvents`), written by the kernel into a bounded
+                buffer per shard and copied out after each launch. The results are the same
+                bits with or without.
+            event_capacity: rows of that buffer per shard and launch; contacts beyond it are
+                counted in ``ContactEvents.dropped``, never lost silently.
 
         Returns:
             :class:`Trajectory` with the frame numbers since the start of the simulation.
         """
         frames = check.positive_int("frames", frames)
         every = check.positive_int("every", every)
-        if not isinstance(velocities, bool):
-            raise ValueError(f"velocities must be True or False, got {velocities!r}")
+        velocities = check.flag("velocities", velocities)
+        events = check.flag("events", events)
+        if events:
+            event_capacity = check.positive_int("event_capacity", event_capacity)
+        gathered = []
+        dropped = 0
         stops = list(range(every, frames + 1, every))
         if not stops or stops[-1] != frames:
             stops.append(frames)
@@ -310,7 +333,17 @@ class Simulator:
                 todo = min(per_launch, frames - done)
                 rows = -(-todo // every)  # every full interval, and a last partial one
                 records = self._records(rows, velocities)
-                self._launch(todo, every, records)
+                buffers = None
+                if events:
+                    buffers = [event_buffer(self._p, self.device, event_capacity)
+                               for _ in (self._shards if len(self._shards) > 1 else [None])]
+                base = self.frame
+                self._launch(todo, every, records, buffers)
+                if events:
+                    for buffer in buffers:
+                        columns, lost = _read_events(buffer, base)
+                        gathered.append(columns)
+                        dropped += lost
                 done += todo
                 position[row:row + rows] = records["record_position_out"].numpy()
                 orientation[row:row + rows] = records["record_orientation_out"].numpy()
@@ -325,7 +358,8 @@ class Simulator:
         return Trajectory(frame=np.array([first] + [first + k for k in stops], dtype=np.int64),
                           dt=self.dt, position=position, orientation=orientation,
                           radius=self._radius_host.copy(), velocity=velocity,
-                          angular_velocity=angular)
+                          angular_velocity=angular,
+                          events=_contact_events(gathered, dropped) if events else None)
 
     def _motion_now(self) -> tuple[np.ndarray, np.ndarray]:
         """True velocity [m/s] and world angular velocity [rad/s] of the current state."""
@@ -396,6 +430,36 @@ def _energy_origin(scene: Scene, swarm: Swarm) -> np.ndarray:
     if len(pts) == 0:
         return np.zeros(3)
     return 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+
+
+def _read_events(buffer: dict, frame_base: int) -> tuple[dict, int]:
+    """The rows one launch wrote into an event buffer, as float64/int64 numpy columns (frames
+    made absolute), and the number of contacts the buffer had no room for."""
+    count = int(buffer["event_count_out"].numpy()[0])
+    capacity = buffer["event_index_out"].shape[0]
+    rows = min(count, capacity)
+    index = buffer["event_index_out"].numpy()[:rows].astype(np.int64)
+    vector = buffer["event_vector_out"].numpy()[:rows].astype(np.float64)
+    scalar = buffer["event_scalar_out"].numpy()[:rows].astype(np.float64)
+    columns = {"frame": index[:, 0] + frame_base, "sphere": index[:, 1], "box": index[:, 2],
+               "resting": index[:, 3] != 0, "position": vector[:, 0], "normal": vector[:, 1],
+               "fraction": scalar[:, 0], "normal_speed": scalar[:, 1]}
+    return columns, count - rows
+
+
+def _contact_events(parts: list[dict], dropped: int):
+    """One :class:`warpsim.events.ContactEvents` from the launches' rows, ordered by frame, then
+    sphere, then the order the contacts happened in (a stable sort keeps it: one thread writes a
+    sphere's contacts in sequence)."""
+    from .events import ContactEvents
+
+    if not parts:
+        return ContactEvents.empty(dropped=dropped)
+    merged = {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
+    order = np.lexsort((merged["sphere"], merged["frame"]))
+    merged = {key: value[order] for key, value in merged.items()}
+    merged["box"] = merged["box"].astype(np.int32)
+    return ContactEvents(dropped=dropped, **merged)
 
 
 def _workers(workers, device, n: int) -> int:
