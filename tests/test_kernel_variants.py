@@ -14,7 +14,14 @@ from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
 from warpsim.kernels.frame_kernel import frame_kernel
 from warpsim.kernels.nearest import BROAD_PHASES
 from warpsim.kernels.variant import KERNEL_OPTIONS
-from warpsim.model import DeviceState, Model, Spheres, kernel_arguments, parameter_names
+from warpsim.model import (
+    DeviceState,
+    Model,
+    Spheres,
+    event_buffer,
+    kernel_arguments,
+    parameter_names,
+)
 
 PRECISIONS = ("float32", "float64")
 FLAGS = (False, True)
@@ -33,6 +40,9 @@ def all_kernels():
                                                                FLAGS, BROAD_PHASES):
         out.append((f"frame/{prec}/{cap}/{spin}/{corr}/{lossy}/{bvh}",
                     frame_kernel(prec, cap, spin, corr, lossy, bvh)))
+        if cap == 8:
+            out.append((f"frame/{prec}/{cap}/{spin}/{corr}/{lossy}/{bvh}/events",
+                        frame_kernel(prec, cap, spin, corr, lossy, bvh, events=True)))
     return out
 
 
@@ -62,7 +72,9 @@ FRAME_COUNTERS = {"bounce_count_out", "capped_count_out", "record_position_out",
                   "record_orientation_out", "record_velocity_out",
                   "record_angular_velocity_out"}
 #: Plain per-launch values (the launch helper's ``values``).
-LAUNCH_VALUES = {"frame_count", "record_every"}
+LAUNCH_VALUES = {"frame_count", "record_every", "sphere_offset"}
+#: Outputs of a whole launch (the launch helper's ``launch_outputs``).
+EVENT_OUTPUTS = {"event_count_out", "event_index_out", "event_vector_out", "event_scalar_out"}
 
 
 @pytest.mark.parametrize("label,kernel", KERNELS, ids=[k[0] for k in KERNELS])
@@ -70,7 +82,7 @@ def test_parameter_names_are_fields(label, kernel):
     """Every parameter is a model field, a sphere constant, ``<state field>_in`` or an output
     ending in ``_out``: the launch helper finds each by name, never by position."""
     sphere_fields = set(Spheres.__dataclass_fields__)
-    outputs = COLLIDE_OUTPUTS | BOUNCE_OUTPUTS | FRAME_COUNTERS
+    outputs = COLLIDE_OUTPUTS | BOUNCE_OUTPUTS | FRAME_COUNTERS | EVENT_OUTPUTS
     for name in parameter_names(kernel):
         if name.endswith("_in"):
             assert name[:-3] in state_fields(), (label, name)
@@ -88,17 +100,19 @@ def test_every_simulator_argument_is_the_named_array():
                      radius=0.1)
     sim = ws.Simulator(ws.Scene(boxes, friction=0.1), swarm, device="cpu")
     records = sim._records(2, True)
-    values = {"frame_count": 3, "record_every": 2}
+    events = event_buffer(sim.model.precision, sim.device, 4)
+    values = {"frame_count": 3, "record_every": 2, "sphere_offset": 0}
     args = kernel_arguments(sim._kernel, model=sim.model, spheres=sim.spheres,
                             state_in=sim.state_0, state_out=sim.state_1,
-                            outputs={**sim.counters, **records}, values=values)
+                            outputs={**sim.counters, **records}, launch_outputs=events,
+                            values=values)
     for name, value in zip(parameter_names(sim._kernel), args, strict=True):
         if name.endswith("_in"):
             assert value is getattr(sim.state_0, name[:-3])
         elif name.endswith("_out") and name[:-4] in state_fields():
             assert value is getattr(sim.state_1, name[:-4])
         elif name.endswith("_out"):
-            assert value is {**sim.counters, **records}[name]
+            assert value is {**sim.counters, **records, **events}[name]
         elif name in LAUNCH_VALUES:
             assert value == values[name]
         elif name in model_fields():
