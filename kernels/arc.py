@@ -4,6 +4,8 @@ Under constant gravity the sphere's centre follows ``x(s) = a + v s + 1/2 g s^2`
 touches the rounded box (core half extents ``h``, Minkowski radius ``R = rb + r``) when it reaches
 distance ``R`` of the core box ``[-h, h]``. Each coordinate is a quadratic in ``s``, so:
 
+0. A cheap exact reject: the arc's range along each local axis over ``[0, tau]`` (its ends and
+   its vertex) against the grown box; an axis whose range stays inside needs no roots below.
 1. The arc against the grown box ``[-(h + R), h + R]`` (the rounded box's OBB) is exact with
    quadratic roots: per axis the set ``|x_i(s)| <= h_i + R`` is at most two closed windows, and
    the first entry is the first ``s`` inside the windows of all three axes. No entry: no hit.
@@ -171,19 +173,34 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
         return out
 
     @wp.func
-    def box_entry(a: vec3, v: vec3, g: vec3, bound: vec3, s_from: scalar, tau: scalar):
+    def all_times():
+        """The windows of an axis whose coordinate never leaves the bound."""
+        return vec4(-NONE, NONE, NONE, -NONE)
+
+    @wp.func
+    def box_entry(a: vec3, v: vec3, g: vec3, bound: vec3, s_from: scalar, tau: scalar,
+                  contained: wp.vec3i):
         """First time in ``[s_from, tau]`` where the arc is in the closed box ``[-bound, bound]``.
 
         Exact up to the rounding of the quadratic roots; a zero ``bound`` (a plate) gives
         windows of a single instant, never lost to rounding of a re-evaluation.
 
+        ``contained[i] = 1`` says the coordinate ``i`` stays within its bound over the whole
+        span (its windows are then not computed).
+
         Returns:
             ``(found, s, axis)``: ``axis`` is the slab entered last (-1 when the arc is inside
             at ``s_from``).
         """
-        w0 = axis_windows(a[0], v[0], HALF * g[0], bound[0])
-        w1 = axis_windows(a[1], v[1], HALF * g[1], bound[1])
-        w2 = axis_windows(a[2], v[2], HALF * g[2], bound[2])
+        w0 = all_times()
+        w1 = all_times()
+        w2 = all_times()
+        if contained[0] == 0:
+            w0 = axis_windows(a[0], v[0], HALF * g[0], bound[0])
+        if contained[1] == 0:
+            w1 = axis_windows(a[1], v[1], HALF * g[1], bound[1])
+        if contained[2] == 0:
+            w2 = axis_windows(a[2], v[2], HALF * g[2], bound[2])
         s = s_from
         axis = int(-1)
         found = int(0)
@@ -503,11 +520,36 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
             bound = h + vec3(radius, radius, radius)
             scale = wp.max(wp.max(wp.max(bound[0], bound[1]), bound[2]),
                            wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2])))
+            slack = TOUCH_REL * scale
             tol = ROOT_TOL * tau
-            dist0, n0 = rounded_box_distance(a, h, radius)
+            # cheap exact reject: the arc's range along each local axis against the grown box
             search = int(1)
+            inside_start = int(1)
+            contained = wp.vec3i(0, 0, 0)
+            for i in range(3):
+                qa = HALF * g[i]
+                x_end = a[i] + tau * (v[i] + tau * qa)
+                lo = wp.min(a[i], x_end)
+                hi = wp.max(a[i], x_end)
+                if qa != ZERO:
+                    s_v = -v[i] / (TWO * qa)
+                    if s_v > ZERO and s_v < tau:
+                        x_v = a[i] + s_v * (v[i] + s_v * qa)
+                        lo = wp.min(lo, x_v)
+                        hi = wp.max(hi, x_v)
+                if lo > bound[i] + slack or hi < -bound[i] - slack:
+                    search = 0
+                if lo > -bound[i] and hi < bound[i]:
+                    contained[i] = 1
+                if wp.abs(a[i]) > bound[i] + slack:
+                    inside_start = 0
             s_from = ZERO
-            if dist0 <= TOUCH_REL * scale:
+            dist0 = scale
+            n0 = vec3(ZERO, ZERO, ZERO)
+            if search == 1 and inside_start == 1:
+                # only a start inside the grown box can be on or in the rounded box
+                dist0, n0 = rounded_box_distance(a, h, radius)
+            if search == 1 and dist0 <= slack:
                 search = 0
                 vn = wp.dot(v, n0)
                 gn = wp.dot(g, n0)
@@ -532,7 +574,8 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
                 for _attempt in range(MAX_SHARP_ENTRIES):
                     if search == 1:
                         search = 0
-                        found, s_e, axis = box_entry(a, v, g, bound, s_from, tau)
+                        found, s_e, axis = box_entry(a, v, g, bound, s_from, tau,
+                                                          contained)
                         if found == 1:
                             x_e = arc_point(a, v, g, s_e)
                             u_e = v + s_e * g

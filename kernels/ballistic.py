@@ -29,7 +29,7 @@ import warp as wp
 
 from .arc import arc_funcs
 from .dynamics import dynamics_funcs
-from .nearest_arc import model_nearest_hit_arc, nearest_arc_funcs
+from .nearest_arc import model_nearest_hit_arc, nearest_arc_funcs, uses_bvh
 from .precision import Precision
 
 wp.set_module_options({"enable_backward": False})
@@ -43,9 +43,8 @@ RESTING_SPEED = 5.0e-3
 COPLANAR_REL = 1.0e-6
 
 
-@cache
 def ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
-                    broad_phase: bool) -> SimpleNamespace:
+                    broad_phase) -> SimpleNamespace:
     """Build the ballistic bounce loop for one precision and one feature set.
 
     Args:
@@ -53,11 +52,19 @@ def ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
         max_bounces: cap on contacts per frame (compiled in).
         spin: update the angular momentum from contact friction (else ``L`` passes through).
         lossy: apply ``energy_retention`` at each bounce (else no loss code is compiled).
-        broad_phase: find each contact with the BVH query (else the loop over all boxes).
+        broad_phase: ``True`` or ``"bvh"``: find each contact with the BVH query; ``False`` or
+            ``"brute"``: the loop over all boxes.
 
     Returns:
         Namespace with ``ballistic_path``.
     """
+    return _ballistic_funcs(p, int(max_bounces), bool(spin), bool(lossy),
+                            uses_bvh(broad_phase))
+
+
+@cache
+def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
+                     broad_phase: bool) -> SimpleNamespace:
     scalar, vec3 = p.scalar, p.vec3
     nearest_hit_arc = model_nearest_hit_arc(p, broad_phase)
     arc_contact_centre = nearest_arc_funcs(p).arc_contact_centre

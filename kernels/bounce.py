@@ -132,7 +132,8 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                     box_half_extents: wp.array(dtype=p.vec3),
                     box_radius: wp.array(dtype=p.scalar), box_extent: wp.array(dtype=p.vec3),
                     box_bvh: wp.uint64,
-                    grid_lower: vec3, grid_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
+                    grid_lower: vec3, grid_cell: vec3, grid_inv_cell: vec3,
+                    grid_dims: wp.vec3i, grid_margin: scalar,
                     grid_cell_start: wp.array(dtype=wp.int32),
                     grid_cell_boxes: wp.array(dtype=wp.int32), frame: int, sphere: int,
                     event_count_out: wp.array(dtype=wp.int32),
@@ -166,7 +167,8 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
         while done == 0:
             box, t, n = nearest_hit(a, d, r, box_center, box_rotation, box_half_extents,
                                     box_radius, box_extent, box_bvh, grid_lower, grid_cell,
-                                    grid_dims, grid_margin, grid_cell_start, grid_cell_boxes)
+                                    grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
+                                    grid_cell_boxes)
             if box < 0:
                 a = a + d
                 done = 1

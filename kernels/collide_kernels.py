@@ -39,6 +39,7 @@ def collide_kernel(precision_name: str, broad_phase: str):
         box_bvh: wp.uint64,
         grid_lower: vec3,
         grid_cell: vec3,
+        grid_inv_cell: vec3,
         grid_dims: wp.vec3i,
         grid_margin: scalar,
         grid_cell_start: wp.array(dtype=wp.int32),
@@ -62,7 +63,7 @@ def collide_kernel(precision_name: str, broad_phase: str):
         d = v * dt
         box, t, n = nearest_hit(a, d, radius[i], box_center, box_rotation,
                                 box_half_extents, box_radius, box_extent, box_bvh,
-                                grid_lower, grid_cell, grid_dims, grid_margin,
+                                grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin,
                                 grid_cell_start, grid_cell_boxes)
         contact = a + t * d
         new_v = v
@@ -111,6 +112,7 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         box_bvh: wp.uint64,
         grid_lower: vec3,
         grid_cell: vec3,
+        grid_inv_cell: vec3,
         grid_dims: wp.vec3i,
         grid_margin: scalar,
         grid_cell_start: wp.array(dtype=wp.int32),
@@ -144,8 +146,9 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
             position_in[i], v, radius[i], m, angular_momentum_in[i], kinetic_energy(m, v),
             zero, zero, dt, friction, max_rot, retention,
             box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
-            grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes,
-            0, i, event_count_out, event_index_out, event_vector_out, event_scalar_out)
+            grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
+            grid_cell_boxes, 0, i, event_count_out, event_index_out, event_vector_out,
+            event_scalar_out)
         bounces_out[i] = bounces
         capped_out[i] = capped
         position_out[i] = x

@@ -82,7 +82,8 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
                      box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
                      box_half_extents: wp.array(dtype=vec3), box_radius: wp.array(dtype=scalar),
                      box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64,
-                     grid_lower: vec3, grid_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
+                     grid_lower: vec3, grid_cell: vec3, grid_inv_cell: vec3,
+                    grid_dims: wp.vec3i, grid_margin: scalar,
                      grid_cell_start: wp.array(dtype=wp.int32),
                      grid_cell_boxes: wp.array(dtype=wp.int32), frame: int, sphere: int,
                      event_count_out: wp.array(dtype=wp.int32),
@@ -94,8 +95,9 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         x, v, L, energy, bounces, capped, supported = bounce_path(
             x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention,
             box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
-            grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes,
-            frame, sphere, event_count_out, event_index_out, event_vector_out, event_scalar_out)
+            grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
+            grid_cell_boxes, frame, sphere, event_count_out, event_index_out, event_vector_out,
+            event_scalar_out)
         # The energy is that of the velocity at the frame's end, v + g dt / 2 (the stored v is
         # semi-implicit Euler's step velocity): semi-implicit Euler keeps that energy exactly
         # in free flight, so the reset changes nothing there and only removes drift.
@@ -138,6 +140,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         box_bvh: wp.uint64,
         grid_lower: vec3,
         grid_cell: vec3,
+        grid_inv_cell: vec3,
         grid_dims: wp.vec3i,
         grid_margin: scalar,
         grid_cell_start: wp.array(dtype=wp.int32),
@@ -197,8 +200,8 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
             x, v, L, o, energy, b, c = linear_frame(
                 x, v, L, o, energy, r, m, gravity, origin, dt, friction, max_rot, retention,
                 box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
-                grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes,
-                f + 1, sphere, event_count_out, event_index_out, event_vector_out,
+                grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
+                grid_cell_boxes, f + 1, sphere, event_count_out, event_index_out, event_vector_out,
                 event_scalar_out)
             bounces += b
             capped += c

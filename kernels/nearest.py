@@ -197,31 +197,31 @@ def grid_funcs(p: Precision) -> SimpleNamespace:
     ZERO = scalar(0.0)
     ONE = scalar(1.0)
     SLACK = scalar(1.0 + REJECT_SLACK)
-    PAD_REL = scalar(BOUNDS_PAD_REL)
-    PAD_ABS = scalar(BOUNDS_PAD_ABS)
 
     @wp.func
     def grid_fits(a: vec3, d: vec3, r: scalar, grid_lower: vec3, grid_cell: vec3,
-                  grid_dims: wp.vec3i, grid_margin: scalar):
-        """``(fits, cell)``: whether the segment's padded query box lies in the grown cell of
-        its start point, and that cell's linear index (x fastest)."""
+                  grid_inv_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar):
+        """``(fits, cell)``: whether the segment's query box lies in the grown cell of its
+        start point, and that cell's linear index (x fastest).
+
+        ``grid_margin`` is the margin the host listed the boxes for, less twice the rounding pad
+        of any coordinate inside the grid (``BOUNDS_PAD_REL`` of the grid's largest coordinate),
+        so no rounding here can accept a path the lists were not made for. Whichever cell the
+        rounded ``floor`` picks, the test is against that cell's own bounds.
+        """
         fits = int(1)
         index = int(0)
         stride = int(1)
         b = a + d
         grow = r * SLACK
         for i in range(3):
-            c = int(wp.floor((a[i] - grid_lower[i]) / grid_cell[i]))
+            c = int(wp.floor((a[i] - grid_lower[i]) * grid_inv_cell[i]))
             if c < 0 or c >= grid_dims[i]:
                 fits = 0
             else:
-                lo = wp.min(a[i], b[i]) - grow
-                hi = wp.max(a[i], b[i]) + grow
-                cell_lo = grid_lower[i] + scalar(c) * grid_cell[i] - grid_margin
-                cell_hi = cell_lo + grid_cell[i] + grid_margin + grid_margin
-                pad = PAD_REL * wp.max(wp.max(wp.abs(lo), wp.abs(hi)),
-                                       wp.max(wp.abs(cell_lo), wp.abs(cell_hi))) + PAD_ABS
-                if lo - pad < cell_lo + pad or hi + pad > cell_hi - pad:
+                cell_lo = grid_lower[i] + scalar(c) * grid_cell[i]
+                if (wp.min(a[i], b[i]) - grow < cell_lo - grid_margin
+                        or wp.max(a[i], b[i]) + grow > cell_lo + grid_cell[i] + grid_margin):
                     fits = 0
                 index += c * stride
                 stride *= grid_dims[i]
@@ -267,8 +267,9 @@ def model_nearest_hit(p: Precision, broad_phase: str):
 
     Returns:
         ``nearest_hit_model(a, d, r, box_center, box_rotation, box_half_extents, box_radius,
-        box_extent, box_bvh, grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start,
-        grid_cell_boxes) -> (box, t, normal)``, the contract of :func:`nearest_hit`.
+        box_extent, box_bvh, grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin,
+        grid_cell_start, grid_cell_boxes) -> (box, t, normal)``, the contract of
+        :func:`nearest_hit`.
     """
     if broad_phase not in BROAD_PHASES:
         raise ValueError(f"broad_phase must be one of {BROAD_PHASES}, got {broad_phase!r}")
@@ -286,7 +287,7 @@ def model_nearest_hit(p: Precision, broad_phase: str):
                           box_half_extents: wp.array(dtype=vec3),
                           box_radius: wp.array(dtype=scalar), box_extent: wp.array(dtype=vec3),
                           box_bvh: wp.uint64, grid_lower: vec3, grid_cell: vec3,
-                          grid_dims: wp.vec3i, grid_margin: scalar,
+                          grid_inv_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
                           grid_cell_start: wp.array(dtype=wp.int32),
                           grid_cell_boxes: wp.array(dtype=wp.int32)):
         """First contact of the sphere over the boxes, by the broad phase compiled in."""
@@ -295,7 +296,8 @@ def model_nearest_hit(p: Precision, broad_phase: str):
         normal = vec3()
         fits = int(0)
         if wp.static(use_grid):
-            fits, cell = grid_fits(a, d, r, grid_lower, grid_cell, grid_dims, grid_margin)
+            fits, cell = grid_fits(a, d, r, grid_lower, grid_cell, grid_inv_cell, grid_dims,
+                                   grid_margin)
             if fits == 1:
                 box, t, normal = nearest_hit_cell(a, d, r, cell, grid_cell_start,
                                                   grid_cell_boxes, box_center, box_rotation,

@@ -9,7 +9,8 @@ exact sweep in the box's frame), :func:`nearest_hit_arc` feeds it every box and
 Over ``[0, tau]`` the arc ``x(s) = a + v s + 1/2 g s^2`` departs from its chord
 ``a -> a + v tau + 1/2 g tau^2`` by ``1/2 g s (tau - s)``: at most the sagitta
 ``|g_i| tau^2 / 8`` along each world axis. The reject and the BVH query are the linear ones for
-the chord, grown by that per-axis sagitta, so they stay conservative for the arc.
+the chord, grown by that per-axis sagitta, so they stay conservative for the arc. With ``g = 0``
+every query is the linear one of the chord (``s = t tau``), bit for bit.
 """
 
 
@@ -43,7 +44,10 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
     arc = arc_funcs(p)
     sweep_rounded_box_arc = arc.sweep_rounded_box_arc
     arc_point = arc.arc_point
-    sweep_box_world = nearest_funcs(p).sweep_box_world
+    linear = nearest_funcs(p)
+    sweep_box_world = linear.sweep_box_world
+    nearest_hit = linear.nearest_hit
+    nearest_hit_bvh = linear.nearest_hit_bvh
     ZERO = scalar(0.0)
     HALF = scalar(0.5)
     EIGHTH = scalar(0.125)
@@ -65,6 +69,35 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
         """Per-axis bound [m] on the arc's distance from its chord over ``[0, tau]``."""
         k = EIGHTH * tau * tau
         return vec3(wp.abs(g[0]) * k, wp.abs(g[1]) * k, wp.abs(g[2]) * k)
+
+    @wp.func
+    def arc_bounds(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar):
+        """What the reject needs of the arc, once per sphere: the chord's midpoint [m], its half
+        extent ``|d| / 2`` [m] and the growth ``r + sagitta`` [m] per world axis."""
+        d = tau * (v + (HALF * tau) * g)
+        sag = sagitta(g, tau)
+        half_d = vec3(HALF * wp.abs(d[0]), HALF * wp.abs(d[1]), HALF * wp.abs(d[2]))
+        return a + HALF * d, half_d, sag + vec3(r, r, r)
+
+    @wp.func
+    def arc_apart(mid: vec3, half_d: vec3, grow: vec3, center: vec3, extent: vec3):
+        """The reject: 1 when the arc's bounds and the box's are apart along a world axis."""
+        rel = mid - center
+        apart = int(0)
+        for i in range(3):
+            if wp.abs(rel[i]) > (extent[i] + grow[i]) * SLACK + half_d[i]:
+                apart = 1
+        return apart
+
+    @wp.func
+    def sweep_box_local_arc(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, center: vec3,
+                            rotation: mat33, half_extents: vec3, box_radius: scalar):
+        """The exact sweep of one box in its frame, the normal back in world coordinates."""
+        to_local = wp.transpose(rotation)
+        hit, s, n_local = sweep_rounded_box_arc(to_local * (a - center), to_local * v,
+                                                to_local * g, tau, half_extents,
+                                                box_radius + r)
+        return hit, s, rotation * n_local
 
     @wp.func
     def sweep_box_world_arc(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, center: vec3,
@@ -96,19 +129,10 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
                 s = t_l * tau
                 normal = n_l
         else:
-            d = tau * (v + (HALF * tau) * g)
-            sag = sagitta(g, tau)
-            mid = a + HALF * d - center
-            apart = int(0)
-            for i in range(3):
-                if wp.abs(mid[i]) > (extent[i] + r + sag[i]) * SLACK + HALF * wp.abs(d[i]):
-                    apart = 1
-            if apart == 0:
-                to_local = wp.transpose(rotation)
-                hit, s, n_local = sweep_rounded_box_arc(to_local * (a - center), to_local * v,
-                                                        to_local * g, tau, half_extents,
-                                                        box_radius + r)
-                normal = rotation * n_local
+            mid, half_d, grow = arc_bounds(a, v, g, tau, r)
+            if arc_apart(mid, half_d, grow, center, extent) == 0:
+                hit, s, normal = sweep_box_local_arc(a, v, g, tau, r, center, rotation,
+                                                     half_extents, box_radius)
         return hit, s, normal
 
     @wp.func
@@ -124,14 +148,22 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
         best = int(-1)
         best_s = tau
         best_n = vec3(ZERO, ZERO, ZERO)
-        for k in range(box_center.shape[0]):
-            hit, s, normal = sweep_box_world_arc(a, v, g, tau, r, box_center[k], box_rotation[k],
-                                                 box_half_extents[k], box_radius[k],
-                                                 box_extent[k])
-            if hit == 1 and (best < 0 or s < best_s):
-                best = k
-                best_s = s
-                best_n = normal
+        if is_zero(g):
+            best, t, best_n = nearest_hit(a, v * tau, r, box_center, box_rotation,
+                                          box_half_extents, box_radius, box_extent)
+            if best >= 0:
+                best_s = t * tau
+        else:
+            mid, half_d, grow = arc_bounds(a, v, g, tau, r)
+            for k in range(box_center.shape[0]):
+                if arc_apart(mid, half_d, grow, box_center[k], box_extent[k]) == 0:
+                    hit, s, normal = sweep_box_local_arc(a, v, g, tau, r, box_center[k],
+                                                         box_rotation[k], box_half_extents[k],
+                                                         box_radius[k])
+                    if hit == 1 and (best < 0 or s < best_s):
+                        best = k
+                        best_s = s
+                        best_n = normal
         return best, best_s, best_n
 
     @wp.func
@@ -152,10 +184,13 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
         best = int(-1)
         best_s = tau
         best_n = vec3(ZERO, ZERO, ZERO)
-        if bvh_id != wp.uint64(0):
+        if is_zero(g):
+            best, t, best_n = nearest_hit_bvh(a, v * tau, r, bvh_id, box_center, box_rotation,
+                                              box_half_extents, box_radius, box_extent)
+            if best >= 0:
+                best_s = t * tau
+        elif bvh_id != wp.uint64(0):
             d = tau * (v + (HALF * tau) * g)
-            if is_zero(g):
-                d = v * tau
             b = a + d
             sag = sagitta(g, tau)
             lower = wp.vec3f()
@@ -167,16 +202,18 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
                 pad = PAD_REL * wp.max(wp.abs(lo), wp.abs(hi)) + PAD_ABS
                 lower[i] = wp.float32(lo - pad)
                 upper[i] = wp.float32(hi + pad)
+            mid, half_d, grow_r = arc_bounds(a, v, g, tau, r)
             query = wp.bvh_query_aabb(bvh_id, lower, upper)
             k = int(0)
             while wp.bvh_query_next(query, k):
-                hit, s, normal = sweep_box_world_arc(a, v, g, tau, r, box_center[k],
-                                                     box_rotation[k], box_half_extents[k],
-                                                     box_radius[k], box_extent[k])
-                if hit == 1 and (best < 0 or s < best_s or (s == best_s and k < best)):
-                    best = k
-                    best_s = s
-                    best_n = normal
+                if arc_apart(mid, half_d, grow_r, box_center[k], box_extent[k]) == 0:
+                    hit, s, normal = sweep_box_local_arc(a, v, g, tau, r, box_center[k],
+                                                         box_rotation[k], box_half_extents[k],
+                                                         box_radius[k])
+                    if hit == 1 and (best < 0 or s < best_s or (s == best_s and k < best)):
+                        best = k
+                        best_s = s
+                        best_n = normal
         return best, best_s, best_n
 
     @wp.func
@@ -201,19 +238,37 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
                            arc_contact_centre=arc_contact_centre)
 
 
-@cache
-def model_nearest_hit_arc(p: Precision, broad_phase: bool):
+def uses_bvh(broad_phase) -> bool:
+    """Whether ``broad_phase`` (``True``/``"bvh"`` or ``False``/``"brute"``) is the BVH query.
+
+    Raises:
+        ValueError: anything else (the arcs have no grid broad phase).
+    """
+    if broad_phase is True or broad_phase == "bvh":
+        return True
+    if broad_phase is False or broad_phase == "brute":
+        return False
+    raise ValueError(f"broad_phase for arcs must be 'brute' or 'bvh', got {broad_phase!r}")
+
+
+def model_nearest_hit_arc(p: Precision, broad_phase):
     """The arc's nearest-hit ``@wp.func`` the kernels call, with the kernels' ``# Model`` arguments.
 
     Args:
         p: precision.
-        broad_phase: compile the BVH query (:func:`nearest_hit_arc_bvh`, ``box_bvh`` read)
-            instead of the loop over all boxes (``box_bvh`` unused).
+        broad_phase: ``True`` or ``"bvh"``: compile the BVH query (:func:`nearest_hit_arc_bvh`,
+            ``box_bvh`` read); ``False`` or ``"brute"``: the loop over all boxes (``box_bvh``
+            unused).
 
     Returns:
         ``nearest_hit_arc_model(a, v, g, tau, r, box_center, box_rotation, box_half_extents,
         box_radius, box_extent, box_bvh) -> (box, s, normal)``.
     """
+    return _model_nearest_hit_arc(p, uses_bvh(broad_phase))
+
+
+@cache
+def _model_nearest_hit_arc(p: Precision, broad_phase: bool):
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     funcs = nearest_arc_funcs(p)
     nearest_hit_arc, nearest_hit_arc_bvh = funcs.nearest_hit_arc, funcs.nearest_hit_arc_bvh

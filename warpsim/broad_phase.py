@@ -69,7 +69,11 @@ class Grid:
         lower: world position of the grid's lowest corner [m], (3,).
         cell: cell size along each axis [m], (3,).
         dims: cells along each axis, (3,) int.
-        margin: how far beyond its cell a path may reach and still use the cell's list [m].
+        margin: how far beyond its cell a path may reach and still use the cell's list [m]; the
+            lists are made for it.
+        kernel_margin: the margin the kernels test against [m]: ``margin`` less twice the
+            rounding pad of the grid's largest coordinate (``BOUNDS_PAD_REL``), so that no
+            rounding in the kernel accepts a path the lists were not made for.
         cell_start: CSR offsets, (cells + 1,) int32; cell ``c`` (x fastest) lists
             ``cell_boxes[cell_start[c]:cell_start[c + 1]]``.
         cell_boxes: box indices, ascending within each cell, int32.
@@ -79,8 +83,14 @@ class Grid:
     cell: np.ndarray
     dims: np.ndarray
     margin: float
+    kernel_margin: float
     cell_start: np.ndarray
     cell_boxes: np.ndarray
+
+    @property
+    def inv_cell(self) -> np.ndarray:
+        """``1 / cell`` [1/m], (3,), as the kernels multiply by it."""
+        return 1.0 / self.cell
 
     @property
     def cells(self) -> int:
@@ -143,6 +153,10 @@ def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32) -> Grid | N
     counts = np.prod(c_max - c_min + 1, axis=1)
     if int(counts.sum()) > MAX_ENTRIES:
         return None
+    largest = float(np.max(np.abs(np.concatenate([lower, lower + dims * cell]))) + margin_k)
+    kernel_margin = margin_k - 2.0 * (BOUNDS_PAD_REL * largest + BOUNDS_PAD_ABS)
+    if not kernel_margin > 0.0:
+        return None
     cells_of = []
     for b in range(k):
         ix = np.arange(c_min[b, 0], c_max[b, 0] + 1)
@@ -158,6 +172,7 @@ def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32) -> Grid | N
     np.add.at(start, cell_ids + 1, 1)
     start = np.cumsum(start)
     return Grid(lower=lower, cell=cell, dims=dims.astype(np.int32), margin=margin_k,
+                kernel_margin=float(np.asarray(kernel_margin, dtype=dtype)),
                 cell_start=start.astype(np.int32), cell_boxes=box_ids.astype(np.int32))
 
 

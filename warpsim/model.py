@@ -46,10 +46,11 @@ class Model:
             (K,) of vec3, for the cheap per-box reject.
         box_bvh: id of a :class:`warp.Bvh` over the reject bounds (float32, rounded outward), or
             0 when no BVH was built (then kernels built without the BVH never read it).
-        grid_lower, grid_cell, grid_dims, grid_margin, grid_cell_start, grid_cell_boxes: the
-            uniform grid of :class:`warpsim.broad_phase.Grid` (lowest corner [m], cell size [m],
-            cells per axis, margin [m], CSR cell lists); a single empty cell when the scene
-            runs without a grid (kernels built without it never read them).
+        grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
+            grid_cell_boxes: the uniform grid of :class:`warpsim.broad_phase.Grid` (lowest
+            corner [m], cell size [m] and its inverse, cells per axis, the kernels' margin [m],
+            CSR cell lists); a single empty cell when the scene runs without a grid (kernels
+            built without it never read them).
         gravity: [m/s^2], world frame. origin: reference point of the potential energy [m].
         dt: frame duration [s]. friction: ``k_f`` [kg/s]. max_rot: clamp on ``|Rot|`` [rad/s].
         retention: fraction of the kinetic energy kept at each contact.
@@ -67,6 +68,7 @@ class Model:
     box_bvh: wp.uint64
     grid_lower: object
     grid_cell: object
+    grid_inv_cell: object
     grid_dims: wp.vec3i
     grid_margin: object
     grid_cell_start: wp.array
@@ -184,12 +186,14 @@ def _grid_fields(grid: Grid | None, p: Precision, device) -> dict:
     """The ``grid_*`` fields of a :class:`Model` (one empty cell without a grid)."""
     if grid is None:
         return {"grid_lower": p.vec3(0.0, 0.0, 0.0), "grid_cell": p.vec3(1.0, 1.0, 1.0),
+                "grid_inv_cell": p.vec3(1.0, 1.0, 1.0),
                 "grid_dims": wp.vec3i(0, 0, 0), "grid_margin": p.scalar(0.0),
                 "grid_cell_start": wp.zeros(2, dtype=wp.int32, device=device),
                 "grid_cell_boxes": wp.zeros(1, dtype=wp.int32, device=device)}
     return {"grid_lower": p.vec3(*grid.lower), "grid_cell": p.vec3(*grid.cell),
+            "grid_inv_cell": p.vec3(*grid.inv_cell),
             "grid_dims": wp.vec3i(*(int(x) for x in grid.dims)),
-            "grid_margin": p.scalar(grid.margin),
+            "grid_margin": p.scalar(grid.kernel_margin),
             "grid_cell_start": wp.array(grid.cell_start, dtype=wp.int32, device=device),
             "grid_cell_boxes": wp.array(np.append(grid.cell_boxes, np.int32(0)),
                                         dtype=wp.int32, device=device)}
