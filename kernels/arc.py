@@ -37,8 +37,6 @@ import warp as wp
 from .precision import Precision
 from .rounded_box import rounded_box_funcs
 
-wp.set_module_options({"enable_backward": False})
-
 #: A start whose signed distance is within this many ulps of the local scale is *on* the surface:
 #: the start-contact rules apply to it, and a search from ``s = 0`` always starts with a positive
 #: distance (the quartic's squared distance and the signed distance round differently).

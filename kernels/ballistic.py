@@ -28,11 +28,10 @@ from types import SimpleNamespace
 import warp as wp
 
 from .arc import arc_funcs
+from .bounce import bounce_funcs
 from .dynamics import dynamics_funcs
 from .nearest_arc import model_nearest_hit_arc, nearest_arc_funcs, uses_bvh
 from .precision import Precision
-
-wp.set_module_options({"enable_backward": False})
 
 #: A contact with a normal speed at most this [m/s] while gravity presses the sphere onto the
 #: surface is a support: a hop of at most 1.3 micrometres, the exact reference's threshold.
@@ -44,7 +43,7 @@ COPLANAR_REL = 1.0e-6
 
 
 def ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
-                    broad_phase) -> SimpleNamespace:
+                    broad_phase, events: bool = False) -> SimpleNamespace:
     """Build the ballistic bounce loop for one precision and one feature set.
 
     Args:
@@ -52,23 +51,27 @@ def ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
         max_bounces: cap on contacts per frame (compiled in).
         spin: update the angular momentum from contact friction (else ``L`` passes through).
         lossy: apply ``energy_retention`` at each bounce (else no loss code is compiled).
-        broad_phase: ``True`` or ``"bvh"``: find each contact with the BVH query; ``False`` or
-            ``"brute"``: the loop over all boxes.
+        broad_phase: one of ``nearest.BROAD_PHASES`` (``True``/``False`` mean ``"bvh"`` and
+            ``"brute"``); see ``nearest_arc.model_nearest_hit_arc``.
+        events: write one row per contact into the event buffer, as ``bounce.bounce_funcs``
+            does (the fraction is then of the frame's time, exact here).
 
     Returns:
         Namespace with ``ballistic_path``.
     """
-    return _ballistic_funcs(p, int(max_bounces), bool(spin), bool(lossy),
-                            uses_bvh(broad_phase))
+    uses_bvh(broad_phase)  # checks the name
+    name = {True: "bvh", False: "brute"}.get(broad_phase, broad_phase)
+    return _ballistic_funcs(p, int(max_bounces), bool(spin), bool(lossy), name, bool(events))
 
 
 @cache
 def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
-                     broad_phase: bool) -> SimpleNamespace:
+                     broad_phase: str, events: bool) -> SimpleNamespace:
     scalar, vec3 = p.scalar, p.vec3
     nearest_hit_arc = model_nearest_hit_arc(p, broad_phase)
     arc_contact_centre = nearest_arc_funcs(p).arc_contact_centre
     arc_point = arc_funcs(p).arc_point
+    write_event = bounce_funcs(p, max_bounces, spin, lossy, "brute", events).write_event
     dyn = dynamics_funcs(p)
     friction_spin = dyn.friction_spin
     potential = dyn.potential
@@ -94,7 +97,14 @@ def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                        box_center: wp.array(dtype=p.vec3), box_rotation: wp.array(dtype=p.mat33),
                        box_half_extents: wp.array(dtype=p.vec3),
                        box_radius: wp.array(dtype=p.scalar), box_extent: wp.array(dtype=p.vec3),
-                       box_bvh: wp.uint64):
+                       box_bvh: wp.uint64, grid_lower: vec3, grid_cell: vec3,
+                       grid_inv_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
+                       grid_cell_start: wp.array(dtype=wp.int32),
+                       grid_cell_boxes: wp.array(dtype=wp.int32), frame: int, sphere: int,
+                       event_count_out: wp.array(dtype=wp.int32),
+                       event_index_out: wp.array2d(dtype=wp.int32),
+                       event_vector_out: wp.array2d(dtype=vec3),
+                       event_scalar_out: wp.array2d(dtype=scalar)):
         """Move a sphere for one frame along its parabolas, bouncing up to ``MAX_BOUNCES`` times.
 
         Args:
@@ -103,7 +113,8 @@ def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
             [J]. g: gravity [m/s^2]. origin: potential reference point [m]. dt: frame duration
             [s]. friction: ``k_f`` [kg/s]. max_rot: ``|Rot|`` clamp [rad/s]. retention: kept
             fraction of kinetic energy per bounce. box_*: the obstacles (see ``nearest``);
-            ``box_bvh``: the BVH over them (read only with ``broad_phase``).
+            ``box_bvh`` and ``grid_*``: the broad phase's data. frame, sphere,
+            event_*: the event buffer and what a row names (see ``bounce.bounce_funcs``).
 
         Returns:
             ``(position, velocity, L, energy, bounces, capped, supported)``: the true velocity
@@ -123,7 +134,9 @@ def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
         done = int(0)
         while done == 0:
             box, s, n = nearest_hit_arc(a, v, g_eff, rest, r, box_center, box_rotation,
-                                        box_half_extents, box_radius, box_extent, box_bvh)
+                                        box_half_extents, box_radius, box_extent, box_bvh,
+                                        grid_lower, grid_cell, grid_inv_cell, grid_dims,
+                                        grid_margin, grid_cell_start, grid_cell_boxes)
             if box < 0:
                 a = arc_point(a, v, g_eff, rest)
                 v = v + rest * g_eff
@@ -148,6 +161,10 @@ def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                 # hop would last less than dt / max_bounces (2 keep |un| / |gn|)
                 resting = gn < -TANGENT_REL * wp.length(g) and (
                     -un <= wp.max(RESTING, -gn * dt * HOP_FRACTION / keep))
+                if wp.static(events):
+                    write_event(frame, sphere, box, int(resting), contact, n, (dt - rest) / dt,
+                                -un, event_count_out, event_index_out, event_vector_out,
+                                event_scalar_out)
                 if resting:
                     supported = 1
                     u_sq = wp.dot(u, u)

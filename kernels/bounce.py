@@ -209,4 +209,4 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                 a = contact
         return a, v, L, energy, bounces, capped, supported
 
-    return SimpleNamespace(bounce_path=bounce_path)
+    return SimpleNamespace(bounce_path=bounce_path, write_event=write_event)

@@ -20,6 +20,7 @@ from functools import cache
 
 import warp as wp
 
+from .ballistic import ballistic_funcs
 from .bounce import bounce_funcs
 from .dynamics import RESET_ULPS, dynamics_funcs
 from .precision import precision
@@ -28,7 +29,7 @@ from .variant import variant_kernel
 
 @cache
 def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_correction: bool,
-                 lossy: bool, broad_phase: str, events: bool = False):
+                 lossy: bool, broad_phase: str, events: bool = False, motion: str = "linear"):
     """Build the frame kernel for one feature set.
 
     One thread per sphere advances it by ``frame_count`` frames with its state in registers,
@@ -49,6 +50,10 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
             ``nearest.BROAD_PHASES``; the results are bit-identical whichever it is.
         events: write every contact into the launch's event buffer (``bounce.bounce_funcs``);
             without it no event code is compiled and the buffer is not touched.
+        motion: ``"linear"``, the sheet's chord per frame (semi-implicit Euler, the state's
+            velocity is the step velocity), or ``"ballistic"``, the exact parabola
+            (``ballistic.ballistic_path``; the state's velocity is the true one). A
+            linear kernel contains no ballistic code and vice versa.
 
     Kernel parameters beyond the model, the sphere constants and the state:
         frame_count: frames this launch advances (>= 0).
@@ -63,7 +68,12 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
     """
     p = precision(precision_name)
     scalar, vec3, mat33, quat = p.scalar, p.vec3, p.mat33, p.quat
-    bounce_path = bounce_funcs(p, max_bounces, spin, lossy, broad_phase, events).bounce_path
+    if motion not in ("linear", "ballistic"):
+        raise ValueError(f"motion must be 'linear' or 'ballistic', got {motion!r}")
+    if motion == "ballistic":
+        path = ballistic_funcs(p, max_bounces, spin, lossy, broad_phase, events).ballistic_path
+    else:
+        path = bounce_funcs(p, max_bounces, spin, lossy, broad_phase, events).bounce_path
     dyn = dynamics_funcs(p)
     energy_along_gravity = dyn.energy_along_gravity
     kinetic_energy = dyn.kinetic_energy
@@ -92,7 +102,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
                      event_scalar_out: wp.array2d(dtype=scalar)):
         """One frame of the linear (chord) model; returns the state and the frame's counts."""
         v = v + gravity * dt
-        x, v, L, energy, bounces, capped, supported = bounce_path(
+        x, v, L, energy, bounces, capped, supported = path(
             x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention,
             box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
             grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
@@ -128,6 +138,46 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
             rot = rotation_vector(L, inertia(m, r), max_rot)
             o = integrate_orientation(o, rot, dt)
         return x, v, L, o, energy, bounces, capped
+
+    @wp.func
+    def ballistic_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar,
+                        m: scalar, gravity: vec3, origin: vec3, dt: scalar, friction: scalar,
+                        max_rot: scalar, retention: scalar,
+                        box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
+                        box_half_extents: wp.array(dtype=vec3),
+                        box_radius: wp.array(dtype=scalar), box_extent: wp.array(dtype=vec3),
+                        box_bvh: wp.uint64, grid_lower: vec3, grid_cell: vec3,
+                        grid_inv_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
+                        grid_cell_start: wp.array(dtype=wp.int32),
+                        grid_cell_boxes: wp.array(dtype=wp.int32), frame: int, sphere: int,
+                        event_count_out: wp.array(dtype=wp.int32),
+                        event_index_out: wp.array2d(dtype=wp.int32),
+                        event_vector_out: wp.array2d(dtype=vec3),
+                        event_scalar_out: wp.array2d(dtype=scalar)):
+        """One frame of the ballistic model (``v`` is the true velocity, before and after).
+
+        The motion keeps the energy itself, so without the correction the speed is only ever
+        lowered to the energy bound (float error is never turned into a gain); with it, the
+        rounding drift is put back through the component along gravity.
+        """
+        x, v, L, energy, bounces, capped, supported = path(
+            x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention,
+            box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
+            grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
+            grid_cell_boxes, frame, sphere, event_count_out, event_index_out, event_vector_out,
+            event_scalar_out)
+        if wp.static(energy_correction):
+            v = energy_along_gravity(v, energy, m, gravity, x, origin, 1)
+        else:
+            v = energy_along_gravity(v, energy, m, gravity, x, origin, 0)
+        if wp.static(spin):
+            rot = rotation_vector(L, inertia(m, r), max_rot)
+            o = integrate_orientation(o, rot, dt)
+        return x, v, L, o, energy, bounces, capped
+
+    one_frame = ballistic_frame if motion == "ballistic" else linear_frame
+    # the true velocity at a recorded frame: the linear state's step velocity plus half a kick
+    RECORD_KICK = HALF if motion == "linear" else ZERO
 
     @variant_kernel
     def advance_frames(
@@ -195,9 +245,9 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         capped = int(0)
         row = int(0)
         with_motion = record_velocity_out.shape[0] > 0
-        half_kick = gravity * (HALF * dt)
+        half_kick = gravity * (RECORD_KICK * dt)
         for f in range(frame_count):
-            x, v, L, o, energy, b, c = linear_frame(
+            x, v, L, o, energy, b, c = one_frame(
                 x, v, L, o, energy, r, m, gravity, origin, dt, friction, max_rot, retention,
                 box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
                 grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,

@@ -20,10 +20,14 @@ from types import SimpleNamespace
 import warp as wp
 
 from .arc import arc_funcs
-from .nearest import BOUNDS_PAD_ABS, BOUNDS_PAD_REL, REJECT_SLACK, nearest_funcs
+from .nearest import (
+    BOUNDS_PAD_ABS,
+    BOUNDS_PAD_REL,
+    BROAD_PHASES,
+    REJECT_SLACK,
+    nearest_funcs,
+)
 from .precision import Precision
-
-wp.set_module_options({"enable_backward": False})
 
 #: A contact centre on the arc carries rounding of a few ulps of its coordinates, the chord and
 #: the box's size; when the Minkowski radius is below this many of those ulps (a point against a
@@ -232,23 +236,79 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
             contact = contact + lift * normal
         return contact
 
-    return SimpleNamespace(sweep_box_world_arc=sweep_box_world_arc,
+    @wp.func
+    def arc_grid_fits(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, grid_lower: vec3,
+                      grid_cell: vec3, grid_inv_cell: vec3, grid_dims: wp.vec3i,
+                      grid_margin: scalar):
+        """``(fits, cell)`` for an arc, as ``nearest.grid_funcs``'s ``grid_fits`` for a chord:
+        the chord's bounding box grown by ``(r + sagitta) (1 + REJECT_SLACK)`` per axis must lie
+        in the grown cell of ``a``; then only the cell's boxes can pass :func:`arc_apart`."""
+        fits = int(1)
+        index = int(0)
+        stride = int(1)
+        b = arc_point(a, v, g, tau)
+        sag = sagitta(g, tau)
+        for i in range(3):
+            c = int(wp.floor((a[i] - grid_lower[i]) * grid_inv_cell[i]))
+            if c < 0 or c >= grid_dims[i]:
+                fits = 0
+            else:
+                grow = (r + sag[i]) * SLACK
+                cell_lo = grid_lower[i] + scalar(c) * grid_cell[i]
+                if (wp.min(a[i], b[i]) - grow < cell_lo - grid_margin
+                        or wp.max(a[i], b[i]) + grow > cell_lo + grid_cell[i] + grid_margin):
+                    fits = 0
+                index += c * stride
+                stride *= grid_dims[i]
+        return fits, index
+
+    @wp.func
+    def nearest_hit_arc_cell(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, cell: int,
+                             grid_cell_start: wp.array(dtype=wp.int32),
+                             grid_cell_boxes: wp.array(dtype=wp.int32),
+                             box_center: wp.array(dtype=vec3),
+                             box_rotation: wp.array(dtype=mat33),
+                             box_half_extents: wp.array(dtype=vec3),
+                             box_radius: wp.array(dtype=scalar),
+                             box_extent: wp.array(dtype=vec3)):
+        """:func:`nearest_hit_arc` over the boxes one grid cell lists (ascending: ties keep the
+        lower index, so it is bit-identical)."""
+        best = int(-1)
+        best_s = tau
+        best_n = vec3(ZERO, ZERO, ZERO)
+        mid, half_d, grow = arc_bounds(a, v, g, tau, r)
+        for j in range(grid_cell_start[cell], grid_cell_start[cell + 1]):
+            k = grid_cell_boxes[j]
+            if arc_apart(mid, half_d, grow, box_center[k], box_extent[k]) == 0:
+                hit, s, normal = sweep_box_local_arc(a, v, g, tau, r, box_center[k],
+                                                     box_rotation[k], box_half_extents[k],
+                                                     box_radius[k])
+                if hit == 1 and (best < 0 or s < best_s):
+                    best = k
+                    best_s = s
+                    best_n = normal
+        return best, best_s, best_n
+
+    return SimpleNamespace(arc_grid_fits=arc_grid_fits,
+                           nearest_hit_arc_cell=nearest_hit_arc_cell,
+                           sweep_box_world_arc=sweep_box_world_arc,
                            nearest_hit_arc=nearest_hit_arc,
                            nearest_hit_arc_bvh=nearest_hit_arc_bvh,
                            arc_contact_centre=arc_contact_centre)
 
 
 def uses_bvh(broad_phase) -> bool:
-    """Whether ``broad_phase`` (``True``/``"bvh"`` or ``False``/``"brute"``) is the BVH query.
+    """Whether ``broad_phase`` falls back to (or is) the BVH query: ``True``, ``"bvh"`` or
+    ``"grid-bvh"``; ``False``, ``"brute"`` or ``"grid"`` are not.
 
     Raises:
-        ValueError: anything else (the arcs have no grid broad phase).
+        ValueError: anything else.
     """
-    if broad_phase is True or broad_phase == "bvh":
+    if broad_phase is True or broad_phase in ("bvh", "grid-bvh"):
         return True
-    if broad_phase is False or broad_phase == "brute":
+    if broad_phase is False or broad_phase in ("brute", "grid"):
         return False
-    raise ValueError(f"broad_phase for arcs must be 'brute' or 'bvh', got {broad_phase!r}")
+    raise ValueError(f"broad_phase for arcs must be one of {BROAD_PHASES}, got {broad_phase!r}")
 
 
 def model_nearest_hit_arc(p: Precision, broad_phase):
@@ -256,22 +316,29 @@ def model_nearest_hit_arc(p: Precision, broad_phase):
 
     Args:
         p: precision.
-        broad_phase: ``True`` or ``"bvh"``: compile the BVH query (:func:`nearest_hit_arc_bvh`,
-            ``box_bvh`` read); ``False`` or ``"brute"``: the loop over all boxes (``box_bvh``
-            unused).
+        broad_phase: one of ``nearest.BROAD_PHASES`` (``True``/``False`` are ``"bvh"`` and
+            ``"brute"``): as for the chord, the grid's cell list when the arc's bounds stay in
+            its cell's margin, else every box or the BVH query; bit-identical whichever.
 
     Returns:
         ``nearest_hit_arc_model(a, v, g, tau, r, box_center, box_rotation, box_half_extents,
-        box_radius, box_extent, box_bvh) -> (box, s, normal)``.
+        box_radius, box_extent, box_bvh, grid_lower, grid_cell, grid_inv_cell, grid_dims,
+        grid_margin, grid_cell_start, grid_cell_boxes) -> (box, s, normal)``.
     """
-    return _model_nearest_hit_arc(p, uses_bvh(broad_phase))
+    name = {True: "bvh", False: "brute"}.get(broad_phase, broad_phase)
+    uses_bvh(name)
+    return _model_nearest_hit_arc(p, name)
 
 
 @cache
-def _model_nearest_hit_arc(p: Precision, broad_phase: bool):
+def _model_nearest_hit_arc(p: Precision, broad_phase: str):
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     funcs = nearest_arc_funcs(p)
     nearest_hit_arc, nearest_hit_arc_bvh = funcs.nearest_hit_arc, funcs.nearest_hit_arc_bvh
+    arc_grid_fits, nearest_hit_arc_cell = funcs.arc_grid_fits, funcs.nearest_hit_arc_cell
+    use_grid = broad_phase in ("grid", "grid-bvh")
+    fallback_bvh = uses_bvh(broad_phase)
+    ZERO = scalar(0.0)
 
     @wp.func
     def nearest_hit_arc_model(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar,
@@ -279,15 +346,34 @@ def _model_nearest_hit_arc(p: Precision, broad_phase: bool):
                               box_rotation: wp.array(dtype=mat33),
                               box_half_extents: wp.array(dtype=vec3),
                               box_radius: wp.array(dtype=scalar),
-                              box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64):
+                              box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64,
+                              grid_lower: vec3, grid_cell: vec3, grid_inv_cell: vec3,
+                              grid_dims: wp.vec3i, grid_margin: scalar,
+                              grid_cell_start: wp.array(dtype=wp.int32),
+                              grid_cell_boxes: wp.array(dtype=wp.int32)):
         """First contact of the sphere's arc over the boxes, by the broad phase compiled in."""
-        if wp.static(broad_phase):
-            box, s, normal = nearest_hit_arc_bvh(a, v, g, tau, r, box_bvh, box_center,
-                                                 box_rotation, box_half_extents, box_radius,
-                                                 box_extent)
-        else:
-            box, s, normal = nearest_hit_arc(a, v, g, tau, r, box_center, box_rotation,
-                                             box_half_extents, box_radius, box_extent)
+        box = int(-1)
+        s = tau
+        normal = vec3(ZERO, ZERO, ZERO)
+        fits = int(0)
+        if wp.static(use_grid):
+            if g[0] != ZERO or g[1] != ZERO or g[2] != ZERO:  # g = 0: the chord's own path
+                fits, cell = arc_grid_fits(a, v, g, tau, r, grid_lower, grid_cell,
+                                           grid_inv_cell, grid_dims, grid_margin)
+                if fits == 1:
+                    box, s, normal = nearest_hit_arc_cell(a, v, g, tau, r, cell,
+                                                          grid_cell_start, grid_cell_boxes,
+                                                          box_center, box_rotation,
+                                                          box_half_extents, box_radius,
+                                                          box_extent)
+        if fits == 0:
+            if wp.static(fallback_bvh):
+                box, s, normal = nearest_hit_arc_bvh(a, v, g, tau, r, box_bvh, box_center,
+                                                     box_rotation, box_half_extents,
+                                                     box_radius, box_extent)
+            else:
+                box, s, normal = nearest_hit_arc(a, v, g, tau, r, box_center, box_rotation,
+                                                 box_half_extents, box_radius, box_extent)
         return box, s, normal
 
     return nearest_hit_arc_model

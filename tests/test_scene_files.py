@@ -117,7 +117,7 @@ def test_thin_walls_has_paper_thin_and_rotated_plates():
 
 
 def test_room_is_the_benchmark_standard_room():
-    from warpsim.benchmark import standard_room
+    from standard_room import standard_room
 
     boxes = load_scene("room").boxes
     assert len(boxes) == 22

@@ -151,7 +151,11 @@ def test_max_bounces_cap_is_the_documented_one():
 
 def test_booleans_are_flags_and_only_flags():
     assert ws.Scene(FLOOR, energy_correction=np.False_).energy_correction is False
-    for value in (1, 0, "true", None):
+    # None is the motion model's default: on for the linear model, off for the ballistic one
+    assert ws.Scene(FLOOR, energy_correction=None).energy_correction is True
+    assert ws.Scene(FLOOR, motion="ballistic").energy_correction is False
+    assert ws.Scene(FLOOR, motion="ballistic", energy_correction=True).energy_correction is True
+    for value in (1, 0, "true"):
         _raises(lambda v=value: ws.Scene(FLOOR, energy_correction=v),
                 f"energy_correction must be true or false, got {value!r}")
 

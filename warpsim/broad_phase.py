@@ -176,8 +176,8 @@ def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32) -> Grid | N
                 cell_start=start.astype(np.int32), cell_boxes=box_ids.astype(np.int32))
 
 
-def choose(requested: str, boxes: RoundedBoxes, reach_m: float, dtype=np.float32,
-           ) -> tuple[str, Grid | None]:
+def choose(requested: str, boxes: RoundedBoxes, reach_m: float, dtype=np.float32, *,
+           grid: bool = True) -> tuple[str, Grid | None]:
     """The broad phase to compile, and its grid when it has one.
 
     Args:
@@ -186,6 +186,8 @@ def choose(requested: str, boxes: RoundedBoxes, reach_m: float, dtype=np.float32
         boxes: the obstacles.
         reach_m: how far a frame's path reaches [m] (see :func:`reach`).
         dtype: the kernels' float type.
+        grid: whether the kernels can use a grid (the ballistic model's arcs cannot: a request
+            for one gets the BVH or every box).
 
     Returns:
         ``(name, grid)`` with ``name`` one of ``kernels.nearest.BROAD_PHASES``.
@@ -195,6 +197,11 @@ def choose(requested: str, boxes: RoundedBoxes, reach_m: float, dtype=np.float32
     fallback = "bvh" if k >= BVH_MIN_BOXES else "brute"
     if choice in ("brute", "bvh"):
         return choice, None
+    if not grid:
+        if choice == "grid":
+            return fallback, None
+        return ("bvh" if BVH_FIXED + BVH_PER_LEVEL * math.log2(max(k, 2)) < BRUTE_FIXED + k
+                else "brute"), None
     grid = build_grid(boxes, reach_m, dtype) if k else None
     if choice == "grid":
         if grid is None:

@@ -20,7 +20,9 @@ class Scene:
         friction: friction coefficient ``k_f`` [kg/s] of ``F_f = -k_f v_t,rel``; 0 disables spin.
         energy_retention: fraction ``k`` in (0, 1] of kinetic energy kept at each contact.
         energy_correction: reset the speed from the energy invariant after each frame; when
-            False the speed is only lowered to that bound (energy is never gained).
+            False the speed is only lowered to that bound (energy is never gained). None: the
+            motion model's default, on for ``"linear"`` and off for ``"ballistic"`` (whose
+            motion conserves the energy itself).
         max_angular_speed: clamp on ``|Rot|`` [rad/s], > 0.
         name: short name (bundled scenes use their file stem).
         description: one line for listings.
@@ -30,6 +32,8 @@ class Scene:
         frames: default number of frames to simulate, >= 1.
         max_bounces: default cap of contacts per sphere per frame, in
             ``[1, warpsim.validation.MAX_BOUNCES]``.
+        motion: default motion model: ``"linear"`` (the sheet's: each frame's path is the
+            chord ``A -> A + v dt``) or ``"ballistic"`` (the exact parabola of each flight).
         source: the file the scene was read from, if any.
 
     Raises:
@@ -37,20 +41,22 @@ class Scene:
     """
 
     def __init__(self, boxes: RoundedBoxes, gravity=DEFAULT_GRAVITY, friction: float = 0.0,
-                 energy_retention: float = 1.0, energy_correction: bool = True,
+                 energy_retention: float = 1.0, energy_correction: bool | None = None,
                  max_angular_speed: float = 50.0, *, name: str = "scene",
                  description: str = "", emitter=None, dt: float = 1.0 / 60.0,
-                 frames: int = 240, max_bounces: int = 8, source: str | None = None):
+                 frames: int = 240, max_bounces: int = 8, motion: str = "linear",
+                 source: str | None = None):
         if not isinstance(boxes, RoundedBoxes):
             raise ValueError(f"boxes must be a warpsim.RoundedBoxes, got {type(boxes).__name__}")
         settings = check.scene_settings(dict(
             gravity=gravity, friction=friction, energy_retention=energy_retention,
             energy_correction=energy_correction, max_angular_speed=max_angular_speed, dt=dt,
-            frames=frames, max_bounces=max_bounces))
+            frames=frames, max_bounces=max_bounces, motion=motion))
         self.boxes = boxes
         self.gravity = check.frozen(settings["gravity"])
         self.friction = settings["friction"]
         self.energy_retention = settings["energy_retention"]
+        self.motion = settings["motion"]
         self.energy_correction = settings["energy_correction"]
         self.max_angular_speed = settings["max_angular_speed"]
         self.name = str(name)
@@ -60,6 +66,22 @@ class Scene:
         self.frames = settings["frames"]
         self.max_bounces = settings["max_bounces"]
         self.source = source
+
+    @property
+    def energy_correction(self) -> bool:
+        """Whether the speed is reset from the energy invariant (for :attr:`motion`)."""
+        return self.energy_correction_for(self.motion)
+
+    @energy_correction.setter
+    def energy_correction(self, value) -> None:
+        self._energy_correction = check.optional_flag("energy_correction", value)
+
+    def energy_correction_for(self, motion: str) -> bool:
+        """The energy correction a run with ``motion`` uses: the one given, else that model's
+        default (on for ``"linear"``, off for ``"ballistic"``)."""
+        if self._energy_correction is not None:
+            return self._energy_correction
+        return check.motion(motion) == "linear"
 
     @classmethod
     def load(cls, name_or_path) -> Scene:

@@ -36,7 +36,7 @@ MAX_GRID_BOXES = 100_000
 such as ``count = [1000, 1000, 1]`` into an error instead of an out-of-memory."""
 
 TOP_KEYS = ("name", "description", "simulation", "physics", "box", "box_grid", "emitter")
-SIMULATION_KEYS = ("dt", "frames", "max_bounces")
+SIMULATION_KEYS = ("dt", "frames", "max_bounces", "motion")
 PHYSICS_KEYS = ("gravity", "friction", "energy_retention", "energy_correction",
                 "max_angular_speed")
 BOX_KEYS = ("center", "half_extents", "rotation", "rotation_deg", "radius")

@@ -29,13 +29,15 @@ class State:
     Attributes:
         frame: frames advanced since the start.
         position: centres [m], (N, 3).
-        velocity: semi-implicit Euler's step velocity [m/s], (N, 3): the one the last frame
-            moved with (its mean velocity), and the one the next frame's gravity kick adds to.
-            The velocity at the frame's end is ``velocity + g dt / 2``.
+        velocity: [m/s], (N, 3). Linear model: semi-implicit Euler's step velocity, the one the
+            last frame moved with (its mean velocity), and the one the next frame's gravity
+            kick adds to; the velocity at the frame's end is ``velocity + g dt / 2``. Ballistic
+            model: the true velocity at the frame's end.
         angular_momentum: [kg m^2/s], (N, 3). orientation: (x, y, z, w), body -> world, (N, 4).
-        energy: total energy ``1/2 m |v + g dt/2|^2 - m g . (p - origin)`` [J], (N,), the
-            per-sphere invariant the speed is reset from (see :attr:`Simulator.energy_origin`);
-            constant but for the contact losses.
+        energy: total energy ``1/2 m |u|^2 - m g . (p - origin)`` [J], (N,), with ``u`` the
+            velocity at the frame's end (``v + g dt / 2`` for the linear model, ``v`` for the
+            ballistic one): the per-sphere invariant (see :attr:`Simulator.energy_origin`),
+            constant but for the contact losses and the hops a support removes.
     """
 
     frame: int
@@ -125,7 +127,8 @@ class Simulator:
 
     def __init__(self, scene: Scene, swarm: Swarm, dt: float | None = None,
                  max_bounces: int | None = None, device=None, precision: str = "float32",
-                 broad_phase: str = "auto", workers: int | None = None):
+                 broad_phase: str = "auto", workers: int | None = None,
+                 motion: str | None = None, energy_correction: bool | None = None):
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be a warpsim.Scene, got {type(scene).__name__}")
         if not isinstance(swarm, Swarm):
@@ -135,6 +138,12 @@ class Simulator:
         self.max_bounces = check.bounce_cap(
             scene.max_bounces if max_bounces is None else max_bounces)
         self.precision = check.precision(precision)
+        self.motion = check.motion(scene.motion if motion is None else motion)
+        """``"linear"`` or ``"ballistic"``: the motion model compiled into the kernel."""
+        self.energy_correction = (scene.energy_correction_for(self.motion)
+                                  if energy_correction is None
+                                  else check.flag("energy_correction", energy_correction))
+        """Whether the speed is reset from the energy after each frame."""
         # everything a run needs, checked before anything is uploaded or compiled
         self.warnings = check.check_run(scene, swarm, self.dt, self.precision,
                                         self.max_bounces)
@@ -154,9 +163,11 @@ class Simulator:
         self.mass = swarm.mass.copy()
         """Sphere masses [kg], (N,), float64."""
         self._seconds = 0.0
-        self._features = (self.precision, self.max_bounces, self.spin, scene.energy_correction,
+        self._half_kick = 0.5 * self.dt if self.motion == "linear" else 0.0
+        self._features = (self.precision, self.max_bounces, self.spin, self.energy_correction,
                           scene.energy_retention < 1.0, self.broad_phase)
-        self._kernel = frame_kernel(*self._features)
+        self._motion_kw = {} if self.motion == "linear" else {"motion": self.motion}
+        self._kernel = frame_kernel(*self._features, **self._motion_kw)
         self._upload(swarm)
         self._shards = _shards(self._n, self.workers)
         self._executor = None
@@ -235,7 +246,8 @@ class Simulator:
         there, with a kernel variant that has the event code."""
         if records is None:
             records = self._no_records
-        kernel = self._kernel if events is None else frame_kernel(*self._features, events=True)
+        kernel = (self._kernel if events is None
+                  else frame_kernel(*self._features, events=True, **self._motion_kw))
         values = {"frame_count": int(frames), "record_every": int(every)}
         shards = self._shards if len(self._shards) > 1 else [None]
         buffers = events if events is not None else [self._no_events] * len(shards)
@@ -364,7 +376,7 @@ class Simulator:
     def _motion_now(self) -> tuple[np.ndarray, np.ndarray]:
         """True velocity [m/s] and world angular velocity [rad/s] of the current state."""
         s = self.state()
-        u = s.velocity + (0.5 * self.dt * self.scene.gravity).astype(s.velocity.dtype)
+        u = s.velocity + (self._half_kick * self.scene.gravity).astype(s.velocity.dtype)
         inertia = 0.4 * self.mass * self._radius_host ** 2
         rot = np.zeros_like(s.angular_momentum)
         if self.spin:
@@ -397,15 +409,16 @@ class Simulator:
     def mechanical_energy(self, state: State | None = None) -> np.ndarray:
         """Total energy of a state [J], (N,), computed in float64 from its position and velocity.
 
-        ``1/2 m |u|^2 - m g . (p - origin)`` with ``u = v + g dt / 2``, the velocity at the
-        frame's end (see :class:`State`); compare with :attr:`initial_energy`.
+        ``1/2 m |u|^2 - m g . (p - origin)`` with ``u`` the velocity at the frame's end
+        (``v + g dt / 2`` for the linear model, ``v`` for the ballistic one; see
+        :class:`State`); compare with :attr:`initial_energy`.
         """
         s = self.state() if state is None else state
         return self._energy_of(s.position.astype(np.float64), s.velocity.astype(np.float64))
 
     def _energy_of(self, position: np.ndarray, velocity: np.ndarray) -> np.ndarray:
         g = self.scene.gravity
-        u = velocity + 0.5 * self.dt * g
+        u = velocity + self._half_kick * g
         return (0.5 * self.mass * np.einsum("ij,ij->i", u, u)
                 - self.mass * ((position - self.energy_origin) @ g))
 

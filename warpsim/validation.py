@@ -32,6 +32,7 @@ import numpy as np
 
 PRECISIONS = ("float32", "float64")
 BROAD_PHASES = ("auto", "bvh", "brute", "grid")
+MOTIONS = ("linear", "ballistic")
 DTYPES = {"float32": np.float32, "float64": np.float64}
 
 INT_LIMIT = 2**31
@@ -392,8 +393,20 @@ def float_dtype(name: str) -> np.dtype:
     return np.dtype(DTYPES[precision(name)])
 
 
+def motion(value: str, name: str = "motion") -> str:
+    """``"linear"`` (the sheet's chord per frame) or ``"ballistic"`` (the exact parabola)."""
+    if not isinstance(value, str) or value not in MOTIONS:
+        raise ValueError(f"{name} must be one of {MOTIONS}, got {_short(value)}")
+    return value
+
+
+def optional_flag(name: str, value) -> bool | None:
+    """None (the default of the model it applies to), or a bool as :func:`flag`."""
+    return None if value is None else flag(name, value)
+
+
 def broad_phase(value: str) -> str:
-    """``"auto"``, ``"bvh"`` or ``"brute"``."""
+    """``"auto"``, ``"bvh"``, ``"brute"`` or ``"grid"``."""
     if not isinstance(value, str) or value not in BROAD_PHASES:
         raise ValueError(f"broad_phase must be one of {BROAD_PHASES}, got {_short(value)}")
     return value
@@ -426,7 +439,8 @@ SCENE_SETTINGS = {
     "gravity": lambda name, v: vec3(name, v),
     "friction": lambda name, v: scalar(name, v, minimum=0.0),
     "energy_retention": lambda name, v: scalar(name, v, positive=True, maximum=1.0),
-    "energy_correction": lambda name, v: flag(name, v),
+    "energy_correction": lambda name, v: optional_flag(name, v),
+    "motion": lambda name, v: motion(v, name),
     "max_angular_speed": lambda name, v: scalar(name, v, positive=True),
 }
 """The check of each physics and simulation setting of a :class:`warpsim.Scene`."""
