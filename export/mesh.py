@@ -1,4 +1,4 @@
-"""Polygon meshes for export and preview: rounded boxes and the checkered sphere prototype.
+"""Polygon meshes for export and preview: sharp and rounded boxes, the checkered sphere prototype.
 
 Meshes are returned in USD's layout: ``points`` (P, 3) float64 [m] in the shape's local frame,
 ``face_vertex_counts`` (F,) int32 and ``face_vertex_indices`` (sum of counts,) int32. Faces are
@@ -7,6 +7,8 @@ right-hand-rule normal of every face points out of the solid. No module here imp
 """
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 
@@ -74,6 +76,15 @@ def rounded_box_mesh(half_extents, radius: float, segments: int = 8
         raise ValueError(f"segments must be an even integer >= 2, got {segments!r}")
     segments = int(segments)
 
+    side, unit, counts, indices = _rounded_box_topology(segments)
+    return side * h + radius * unit, counts.copy(), indices.copy()
+
+
+@functools.lru_cache(maxsize=8)
+def _rounded_box_topology(segments: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What a rounded box's mesh shares with every other of the same ``segments``: per vertex
+    the side signs (P, 3) and the unit outward direction (P, 3), and the faces (counts,
+    indices); the points are then ``side * h + radius * unit``. Read-only arrays (cached)."""
     side, direction = _axis_grid(segments)
     n = segments + 2  # grid entries per axis
     last = n - 1
@@ -86,7 +97,6 @@ def rounded_box_mesh(half_extents, radius: float, segments: int = 8
     grid = np.stack([ix[on_surface], iy[on_surface], iz[on_surface]], axis=1)
     d = direction[grid]
     unit = d / np.linalg.norm(d, axis=1, keepdims=True)
-    points = side[grid] * h + radius * unit
 
     faces = []
     j, k = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
@@ -103,9 +113,48 @@ def rounded_box_mesh(half_extents, radius: float, segments: int = 8
                 idx[axis], idx[b], idx[c] = np.full_like(cj, fixed), cj, ck
                 quad.append(vertex_id[idx[0], idx[1], idx[2]])
             faces.append(np.stack(quad, axis=1))
-    indices = np.concatenate(faces).astype(np.int32)
-    counts = np.full(indices.shape[0], 4, dtype=np.int32)
-    return points, counts, indices.ravel()
+    indices = np.concatenate(faces).astype(np.int32).ravel()
+    counts = np.full(indices.size // 4, 4, dtype=np.int32)
+    out = (side[grid], unit, counts, indices)
+    for arr in out:
+        arr.setflags(write=False)
+    return out
+
+
+def box_mesh(half_extents) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closed quad mesh of a sharp box ``[-h, h]``: six faces with four vertices each.
+
+    Each face has its own four vertices (24 in all, none shared between faces), so a reader
+    that computes smooth vertex normals still shades every face flat, as a box should look.
+    Zero half extents are legal (a plate's two faces coincide, back to back).
+
+    Args:
+        half_extents: half sizes along the local axes [m], shape (3,), each >= 0.
+
+    Returns:
+        ``(points, face_vertex_counts, face_vertex_indices)``: points (24, 3) float64 [m] in the
+        box's local frame, counts (6,) int32 (all 4), indices (24,) int32, counter-clockwise seen
+        from outside.
+
+    Raises:
+        ValueError: bad half extents.
+    """
+    h = np.asarray(half_extents, dtype=np.float64)
+    if h.shape != (3,) or not np.isfinite(h).all() or (h < 0).any():
+        raise ValueError(f"half_extents must be 3 finite values >= 0, got {half_extents!r}")
+    faces = []
+    for axis in range(3):
+        b, c = (axis + 1) % 3, (axis + 2) % 3  # (b, c, axis) right-handed: b x c = +axis
+        for sign in (1.0, -1.0):
+            corners = [(-1, -1), (1, -1), (1, 1), (-1, 1)]
+            if sign < 0:
+                corners = corners[::-1]
+            for sb, sc in corners:
+                point = np.zeros(3)
+                point[axis], point[b], point[c] = sign, sb, sc
+                faces.append(point)
+    points = np.array(faces) * h
+    return (points, np.full(6, 4, dtype=np.int32), np.arange(24, dtype=np.int32))
 
 
 def checker_sphere_mesh(longitudes: int = 16, latitudes: int = 8

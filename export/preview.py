@@ -1,8 +1,12 @@
-"""A quick look at one recorded frame: a PNG drawn with Pillow and numpy, no GPU.
+"""Pictures of spheres among boxes, drawn with Pillow and numpy from arrays (no GPU, no USD).
 
-The camera is placed automatically: a three-quarter view (looking down at 30 degrees, from the
-+x/+z diagonal, y up) as near as it can be while the scene's bounding box (the obstacles and
-this frame's spheres) is in view, centred in the picture.
+:func:`draw_frame` draws one state; :class:`Renderer` keeps a fixed camera and the obstacles
+drawn once, for a sequence of frames (a movie); :func:`render_preview` reads a frame of a
+warpsim USD file and saves it as an image.
+
+The camera is placed automatically: a three-quarter view (by default looking down at 30
+degrees, from the +x/+z diagonal, y up) as near as it can be while the given bounds (by default
+the obstacles and the spheres) are in view, centred in the picture.
 
 Obstacles are drawn from the same tessellation as the USD meshes, flat shaded, back faces culled.
 Spheres are ray-cast per pixel with their octant checker (the look of the USD prototype, so spin
@@ -29,23 +33,14 @@ from PIL import Image, ImageDraw
 from ..obstacles import RoundedBoxes, quat_to_matrix
 from .files import atomic_output
 from .mesh import rounded_box_mesh
-from .usd import (
-    OBSTACLE_COLOR,
-    SPHERE_DARK,
-    SPHERE_LIGHT,
-    boxes_of_stage,
-    instancer_state,
-    open_stage,
-    recorded_frames,
-    sphere_instancer,
-    sphere_radii,
-)
+from .usd import OBSTACLE_COLOR, SPHERE_DARK, SPHERE_LIGHT, read_usd_boxes, read_usd_frame
 
 SUPERSAMPLING = 2  # rendered at this many times the size per axis, then averaged down
 PIXELS_PER_BATCH = 1 << 20  # sphere pixels ray-cast together: bounds the temporary memory
 PREVIEW_SEGMENTS = 6  # edges per quarter circle of a rounded box in the picture
-AZIMUTH = np.radians(45.0)  # view direction around +y, from +z towards +x
-ELEVATION = np.radians(30.0)  # camera height above the horizon, seen from the target
+AZIMUTH_DEG = 45.0  # default view direction around +y, from +z towards +x [deg]
+ELEVATION_DEG = 30.0  # default camera height above the horizon, seen from the target [deg]
+MAX_ELEVATION_DEG = 89.0  # straight down or up leaves no image "right" direction: refused
 VERTICAL_FOV = np.radians(40.0)
 FRAME_MARGIN = 0.9  # the bounding box fills at most this fraction of the half field of view
 CENTRING_STEPS = 64  # bisection steps centring the picture: down to float64 resolution
@@ -88,19 +83,25 @@ class Camera:
     height: int
 
     @classmethod
-    def framing(cls, lo, hi, width: int, height: int) -> Camera:
-        """The three-quarter view camera that frames the box ``[lo, hi]`` (world, [m]) tightly.
+    def framing(cls, lo, hi, width: int, height: int, *, azimuth: float = AZIMUTH_DEG,
+                elevation: float = ELEVATION_DEG) -> Camera:
+        """The camera looking from ``azimuth``/``elevation`` that frames ``[lo, hi]`` tightly.
 
-        The view direction is fixed (:data:`AZIMUTH`, :data:`ELEVATION`); the eye position is the
-        one, among those seeing every corner of the box within :data:`FRAME_MARGIN` of the half
+        The view direction comes from the two angles [deg] (azimuth around +y from +z towards
+        +x, elevation above the horizon); the eye position is the one, among those seeing every
+        corner of the box ``[lo, hi]`` (world, [m]) within :data:`FRAME_MARGIN` of the half
         field of view, nearest to the box, with the box's picture centred. Each frustum side is a
         linear constraint on the eye, so the distance is found in closed form per image axis;
         the centring is a bisection per axis.
+
+        Raises:
+            ValueError: an angle that is not finite, or an elevation beyond
+                :data:`MAX_ELEVATION_DEG`.
         """
+        az, el = _view_angles(azimuth, elevation)
         lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
         size = max(float(np.linalg.norm(hi - lo)), 1e-6)
-        back = np.array([np.cos(ELEVATION) * np.sin(AZIMUTH), np.sin(ELEVATION),
-                         np.cos(ELEVATION) * np.cos(AZIMUTH)])
+        back = np.array([np.cos(el) * np.sin(az), np.sin(el), np.cos(el) * np.cos(az)])
         forward = -back
         right = np.cross(forward, [0.0, 1.0, 0.0])
         right /= np.linalg.norm(right)
@@ -169,6 +170,20 @@ class Camera:
         v = (0.5 * self.height - (np.arange(y0, y1) + 0.5)) / self.focal
         d = (u[None, :, None] * self.right + v[:, None, None] * self.up + self.forward)
         return d / np.linalg.norm(d, axis=2, keepdims=True)
+
+
+def _view_angles(azimuth, elevation) -> tuple[float, float]:
+    """Validated view angles in radians from degrees."""
+    try:
+        az, el = float(azimuth), float(elevation)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"azimuth and elevation must be numbers [deg], got {azimuth!r}, "
+                         f"{elevation!r}") from exc
+    if not (np.isfinite(az) and np.isfinite(el)):
+        raise ValueError(f"azimuth and elevation must be finite, got {azimuth!r}, {elevation!r}")
+    if abs(el) > MAX_ELEVATION_DEG:
+        raise ValueError(f"elevation must be within +-{MAX_ELEVATION_DEG:g} deg, got {el:g}")
+    return np.radians(az), np.radians(el)
 
 
 def _light_direction(camera: Camera) -> np.ndarray:
@@ -313,8 +328,7 @@ def _draw_spheres(rgb, depth, camera: Camera, center, radius, rotation, light) -
 
 def _box_bounds(boxes: RoundedBoxes) -> tuple[np.ndarray, np.ndarray]:
     """World axis-aligned bounds of each rounded box, ``(lo, hi)`` each (K, 3) [m]."""
-    reach = np.einsum("kij,kj->ki", np.abs(boxes.rotation_matrices()),
-                      boxes.half_extents + boxes.radius[:, None])
+    reach = boxes.world_extent()
     return boxes.center - reach, boxes.center + reach
 
 
@@ -368,24 +382,88 @@ def _draw_outline(image: Image.Image, camera: Camera, boxes: RoundedBoxes, k: in
                           width=SUPERSAMPLING)
 
 
-def _scene_bounds(boxes: RoundedBoxes | None, position, radius) -> tuple[np.ndarray, np.ndarray]:
-    """World bounds ``(lo, hi)`` (3,) [m] of the obstacles and the spheres."""
+def scene_bounds(boxes: RoundedBoxes | None, position, radius) -> tuple[np.ndarray, np.ndarray]:
+    """World bounds ``(lo, hi)`` (3,) [m] of the obstacles and the spheres.
+
+    Args:
+        boxes: the obstacles, or None. position: sphere centres [m], (N, 3) or (F, N, 3) for
+            the bounds over several frames. radius: (N,) [m].
+    """
+    position = np.asarray(position, dtype=np.float64)
+    radius = np.asarray(radius, dtype=np.float64).reshape(-1)
     los, his = [], []
-    if boxes is not None:
+    if boxes is not None and len(boxes):
         lo, hi = _box_bounds(boxes)
         los.append(lo.min(axis=0))
         his.append(hi.max(axis=0))
-    if position.shape[0]:
-        los.append((position - radius[:, None]).min(axis=0))
-        his.append((position + radius[:, None]).max(axis=0))
+    if position.size:
+        p = position.reshape(-1, radius.size, 3)
+        finite = np.isfinite(p).all(axis=2)
+        if finite.any():
+            r = np.broadcast_to(radius, finite.shape)[finite]
+            los.append((p[finite] - r[:, None]).min(axis=0))
+            his.append((p[finite] + r[:, None]).max(axis=0))
     if not los:
         return -np.ones(3), np.ones(3)
     return np.min(los, axis=0), np.max(his, axis=0)
 
 
+class Renderer:
+    """A fixed camera and the obstacles drawn once: draws any number of sphere states fast.
+
+    Args:
+        boxes: the obstacles, or None.
+        lo, hi: world bounds the camera frames ([m], (3,) each), e.g. from :func:`scene_bounds`.
+        size: ``(width, height)`` of the pictures [px], each >= 8.
+        azimuth, elevation: view direction [deg] (see :meth:`Camera.framing`).
+
+    Attributes:
+        camera: the camera, at the pictures' size.
+    """
+
+    def __init__(self, boxes: RoundedBoxes | None, lo, hi, *, size=(960, 540),
+                 azimuth: float = AZIMUTH_DEG, elevation: float = ELEVATION_DEG):
+        width, height = _size(size)
+        lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+        self.camera = Camera.framing(lo, hi, width, height, azimuth=azimuth,
+                                     elevation=elevation)
+        self._big = self.camera.scaled(SUPERSAMPLING)
+        self._light = _light_direction(self.camera)
+        big = self._big
+        fade = np.linspace(0.0, 1.0, big.height)[:, None, None]
+        self._rgb = np.broadcast_to(BACKGROUND_TOP * (1 - fade) + BACKGROUND_BOTTOM * fade,
+                                    (big.height, big.width, 3)).copy()
+        self._depth = np.full((big.height, big.width), np.inf)
+        scale = max(float(np.linalg.norm(hi - lo)), 1e-6)
+        has_boxes = boxes is not None and len(boxes) > 0
+        cut = _cutaway(boxes, self.camera.eye) if has_boxes else np.zeros(0, dtype=bool)
+        for k in np.flatnonzero(~cut):
+            _draw_box(self._rgb, self._depth, big, *_box_faces(boxes, k, scale), self._light)
+        self._boxes, self._cut = boxes, np.flatnonzero(cut)
+
+    def draw(self, position, orientation, radius) -> Image.Image:
+        """The picture of spheres (world frame) among the obstacles.
+
+        Args:
+            position: sphere centres [m], shape (N, 3).
+            orientation: sphere orientations (x, y, z, w), body -> world, shape (N, 4).
+            radius: sphere radii [m], shape (N,).
+        """
+        position = np.asarray(position, dtype=np.float64).reshape(-1, 3)
+        radius = np.asarray(radius, dtype=np.float64).reshape(-1)
+        rotation = quat_to_matrix(np.asarray(orientation, dtype=np.float64).reshape(-1, 4))
+        rgb, depth = self._rgb.copy(), self._depth.copy()
+        _draw_spheres(rgb, depth, self._big, position, radius, rotation, self._light)
+        image = Image.fromarray(np.round(rgb * 255.0).astype(np.uint8), "RGB")
+        for k in self._cut:
+            _draw_outline(image, self._big, self._boxes, k)
+        return image.resize((self.camera.width, self.camera.height), Image.Resampling.BOX)
+
+
 def draw_frame(boxes: RoundedBoxes | None, position, orientation, radius, *,
-               size=(960, 540)) -> tuple[Image.Image, Camera]:
-    """Draw obstacles and spheres (world frame) from the automatic three-quarter view.
+               size=(960, 540), azimuth: float = AZIMUTH_DEG, elevation: float = ELEVATION_DEG,
+               bounds=None) -> tuple[Image.Image, Camera]:
+    """Draw obstacles and spheres (world frame) from an automatic three-quarter view.
 
     Args:
         boxes: the obstacles, or None.
@@ -393,33 +471,18 @@ def draw_frame(boxes: RoundedBoxes | None, position, orientation, radius, *,
         orientation: sphere orientations (x, y, z, w), body -> world, shape (N, 4).
         radius: sphere radii [m], shape (N,).
         size: ``(width, height)`` of the picture [px].
+        azimuth, elevation: view direction [deg] (see :meth:`Camera.framing`).
+        bounds: ``(lo, hi)`` world box the camera frames [m]; default: the obstacles and these
+            spheres (:func:`scene_bounds`).
 
     Returns:
         The RGB picture and the camera it was seen from (at the picture's size).
     """
-    width, height = _size(size)
     position = np.asarray(position, dtype=np.float64).reshape(-1, 3)
     radius = np.asarray(radius, dtype=np.float64).reshape(-1)
-    rotation = quat_to_matrix(np.asarray(orientation, dtype=np.float64).reshape(-1, 4))
-    lo, hi = _scene_bounds(boxes, position, radius)
-    camera = Camera.framing(lo, hi, width, height)
-    big = camera.scaled(SUPERSAMPLING)
-    light = _light_direction(camera)
-
-    fade = np.linspace(0.0, 1.0, big.height)[:, None, None]
-    rgb = np.broadcast_to(BACKGROUND_TOP * (1 - fade) + BACKGROUND_BOTTOM * fade,
-                          (big.height, big.width, 3)).copy()
-    depth = np.full((big.height, big.width), np.inf)
-    scale = max(float(np.linalg.norm(hi - lo)), 1e-6)
-    cut = _cutaway(boxes, camera.eye) if boxes is not None else np.zeros(0, dtype=bool)
-    for k in np.flatnonzero(~cut):
-        _draw_box(rgb, depth, big, *_box_faces(boxes, k, scale), light)
-    _draw_spheres(rgb, depth, big, position, radius, rotation, light)
-
-    image = Image.fromarray(np.round(rgb * 255.0).astype(np.uint8), "RGB")
-    for k in np.flatnonzero(cut):
-        _draw_outline(image, big, boxes, k)
-    return image.resize((width, height), Image.Resampling.BOX), camera
+    lo, hi = scene_bounds(boxes, position, radius) if bounds is None else bounds
+    renderer = Renderer(boxes, lo, hi, size=size, azimuth=azimuth, elevation=elevation)
+    return renderer.draw(position, orientation, radius), renderer.camera
 
 
 def _size(size) -> tuple[int, int]:
@@ -432,50 +495,69 @@ def _size(size) -> tuple[int, int]:
     return width, height
 
 
-def render_preview(usd_path, frame: int, png_path, *, size=(960, 540)) -> Path:
-    """Draw one recorded frame of a warpsim USD file to a PNG (CPU only).
+def image_format(path) -> str:
+    """The Pillow format name that saves a picture at ``path``, from its extension (any case).
+
+    Raises:
+        ValueError: an extension Pillow cannot save (the message lists the common ones).
+    """
+    suffix = Path(path).suffix.lower()
+    Image.init()
+    fmt = Image.registered_extensions().get(suffix)
+    if fmt is None or fmt not in Image.SAVE:
+        raise ValueError(f"image must end in .png, .jpg, .webp, .bmp or .tif (a format Pillow "
+                         f"can write), got {str(path)!r}")
+    return fmt
+
+
+def save_image(image: Image.Image, path) -> Path:
+    """Save ``image`` atomically in the format its extension names (``.jpg`` -> JPEG).
+
+    Raises:
+        ValueError: an unknown extension. FileNotFoundError: the folder does not exist.
+    """
+    path = Path(path)
+    fmt = image_format(path)
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"folder of {str(path)!r} does not exist")
+    with atomic_output(path) as tmp:
+        image.save(tmp, format=fmt)
+    return path
+
+
+def render_preview(usd_path, frame: int, image_path, *, size=(960, 540),
+                   azimuth: float = AZIMUTH_DEG, elevation: float = ELEVATION_DEG) -> Path:
+    """Draw one recorded frame of a warpsim USD file to an image (CPU only).
 
     See the module docstring for the camera and the drawing (walls of a closed scene that face
-    the camera are cut away and outlined, so the inside shows). The PNG is written atomically
-    (temporary name next to ``png_path``, then a rename): on error nothing is left behind and a
-    file already at ``png_path`` is untouched.
+    the camera are cut away and outlined, so the inside shows). The image is written atomically
+    (temporary name next to ``image_path``, then a rename): on error nothing is left behind and a
+    file already at ``image_path`` is untouched.
 
     Args:
         usd_path: a file written by :func:`warpsim.export.write_usd`.
-        frame: a recorded frame index (time code), e.g. ``trajectory.frame[k]``.
-        png_path: output file; written in PNG format whatever its extension. Its folder must
-            exist.
+        frame: a recorded frame index (time code), e.g. ``trajectory.frame[k]``, or a negative
+            number counting recorded frames from the end (-1: the last).
+        image_path: output file; its extension picks the format (``.png``, ``.jpg``, ...). Its
+            folder must exist.
         size: ``(width, height)`` of the picture [px], each >= 8.
+        azimuth, elevation: view direction [deg] (see :meth:`Camera.framing`).
 
     Returns:
-        ``png_path`` as a :class:`pathlib.Path`.
+        ``image_path`` as a :class:`pathlib.Path`.
 
     Raises:
         ValueError: ``frame`` is not a recorded frame (the message gives the available range),
-            bad ``size``, or the file was not written by warpsim.
+            bad ``size``, angles or image extension, or the file was not written by warpsim.
         FileNotFoundError: no file at ``usd_path``, or the output folder does not exist.
     """
-    png_path = Path(png_path)
-    width, height = _size(size)
-    if not png_path.parent.is_dir():
-        raise FileNotFoundError(f"folder of {str(png_path)!r} does not exist")
-    stage = open_stage(usd_path)
-    instancer = sphere_instancer(stage, usd_path)
-    frames = recorded_frames(instancer)
-    if frames.size == 0:
-        raise ValueError(f"frame {frame!r}: {str(usd_path)!r} has no recorded frames")
-    steps = np.unique(np.diff(frames))
-    regular = f", every {steps[0]}" if steps.size == 1 and steps[0] > 1 else ""
-    available = f"recorded frames are {frames[0]}..{frames[-1]} ({frames.size} frames{regular})"
-    if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)):
-        raise ValueError(f"frame must be an integer frame index, got {frame!r}; {available}")
-    if int(frame) not in set(frames.tolist()):
-        raise ValueError(f"frame {frame!r} is not a recorded frame of {str(usd_path)!r}: "
-                         f"{available}")
-    position, orientation = instancer_state(instancer, int(frame))
-    radius = sphere_radii(instancer)
-    image, _ = draw_frame(boxes_of_stage(stage, usd_path), position, orientation, radius,
-                          size=(width, height))
-    with atomic_output(png_path) as tmp:
-        image.save(tmp, format="PNG")
-    return png_path
+    image_path = Path(image_path)
+    image_format(image_path)
+    _size(size)
+    _view_angles(azimuth, elevation)
+    if not image_path.parent.is_dir():
+        raise FileNotFoundError(f"folder of {str(image_path)!r} does not exist")
+    state = read_usd_frame(usd_path, frame)
+    image, _ = draw_frame(read_usd_boxes(usd_path), state.position[0], state.orientation[0],
+                          state.radius, size=size, azimuth=azimuth, elevation=elevation)
+    return save_image(image, image_path)

@@ -4,7 +4,9 @@ Stage layout (``Y`` up, 1 unit = 1 m, default prim ``/World``)::
 
     /World                         Xform; warpsim:dt (double, [s]), warpsim:scene (string)
       /Looks                       UsdPreviewSurface materials
-      /Obstacles/Box_0000 ...      one prim per box, authored once (no time samples)
+      /ObstacleShapes              class prim (abstract, never drawn): one Mesh per distinct shape
+        /Shape_0000 ...            points in the box's local frame, displayColor, material bound
+      /Obstacles/Box_0000 ...      one Mesh prim per box, referencing its shape; authored once
       /Spheres                     PointInstancer, one instance per sphere
         /Prototypes/CheckerBall    unit sphere with an octant checker, so spin is visible
 
@@ -17,63 +19,89 @@ What is stored, and at which precision (``read_usd`` returns exactly this):
 - ``positions`` (point3f[], time-sampled): sphere centres [m] in float32. Reading gives
   ``position.astype(float32)`` bit for bit.
 - ``orientationsf`` (quatf[], time-sampled): orientations body -> world in float32, read back bit
-  for bit as ``orientation.astype(float32)`` in warpsim's ``(x, y, z, w)`` order. USD takes
-  ``orientationsf`` over ``orientations`` when both are authored.
-- ``orientations`` (quath[], time-sampled): the same quaternions in half precision (11-bit
-  significand: rounding error at most 2^-12 ~ 2.4e-4 per component, each rounded once from the
-  source values) for readers that predate ``orientationsf``;
-  ``read_usd`` uses it only when ``orientationsf`` is missing.
+  for bit as ``orientation.astype(float32)`` in warpsim's ``(x, y, z, w)`` order. USD itself
+  (usdview, Houdini, Omniverse) takes ``orientationsf`` over ``orientations`` when both are
+  authored.
+- ``orientations`` (quath[], time-sampled): the same rotations in half precision, for readers
+  that only know this attribute (Blender's importer reads it and ignores ``orientationsf``).
+  Made as good as half precision allows (:func:`half_orientations`): rounded once from the
+  normalised float64 quaternion, choosing among the neighbouring half values of each component
+  the combination whose rotation matrix, used as is (unnormalised, as such readers do), is
+  nearest the true one; the sign of each quaternion follows the previous written frame, so a
+  reader that interpolates component-wise turns the short way. ``read_usd`` uses it only when
+  ``orientationsf`` is missing.
+- ``velocities`` (vector3f[], time-sampled, when the trajectory has ``velocity`` and the writer
+  is asked for it): each sphere's true velocity at the frame [m/s], float32, read back bit for
+  bit. ``angularVelocities`` (vector3f[], time-sampled, with ``angular_velocity``): world-frame
+  angular velocity in degrees per second, as the USD schema defines it (float32 of the float64
+  product ``omega * 180 / pi``). Renderers use both for motion blur; USD also uses them to place
+  instances between samples (``position + velocity * delta`` from the earlier sample).
 - ``scales`` (float3[]): sphere radius on every axis, float32 (the prototype has radius 1);
   ``warpsim:radius`` (double[]) keeps the radii exactly. ``ids`` (int64[]) are the indices of the
   spheres in the simulated swarm; ``protoIndices`` are all 0. These are authored once.
-- Obstacles: sharp boxes (radius 0) are ``Cube`` prims (size 2, scaled by the half extents), rounded
-  boxes are ``Mesh`` prims from :func:`warpsim.export.mesh.rounded_box_mesh` (points in float32).
-  Both carry ``xformOp:translate`` (double3) and ``xformOp:orient`` (quatd), plus the custom
-  attributes ``warpsim:halfExtents`` (double3) and ``warpsim:radius`` (double), so
-  :func:`read_usd_boxes` rebuilds the boxes in float64.
+- Obstacles: every box is a ``Mesh`` prim with its material bound and ``primvars:displayColor``
+  set, so importers that drop the material of other prim types (Blender does for ``Cube``
+  prims) keep the look. Sharp boxes (radius 0) are 24-point boxes (:func:`box_mesh`, one quad
+  per face, flat shaded by any reader), rounded boxes come from :func:`rounded_box_mesh`; points
+  in float32. Boxes of the same shape (half extents and radius equal to the bit) share one
+  mesh through an internal reference to ``/World/ObstacleShapes/Shape_*``, so a lattice of
+  1e5 identical boxes stores its mesh once. Each box prim carries ``xformOp:translate``
+  (double3) and ``xformOp:orient`` (quatd); its shape carries the custom attributes
+  ``warpsim:halfExtents`` (double3) and ``warpsim:radius`` (double), which every box composes
+  through its reference, from which :func:`read_usd_boxes` rebuilds the boxes in float64.
+  Writing is linear in the number of boxes (Sdf specs authored in one change block, no
+  per-prim lookups).
 
-Size (measured with usd-core 26.11 on random data, least-squares fit over files from 1 to
-10^5 sphere-frames; :func:`estimate_usd_bytes` uses it): per sphere and recorded frame 36.0 bytes
-in ``.usdc`` (float32 position 12 B + quatf 16 B + quath 8 B, stored uncompressed) and about
-131 bytes in ``.usda`` (decimal text); per sphere (static attributes) 20 B / 68 B; per frame
-(time-sample bookkeeping) 56 B / 57 B; fixed (stage, materials, sphere prototype) 14 kB / 64 kB.
-Each rounded-box mesh adds about 7 kB (usdc) / 29 kB (usda), a cube about 1 kB.
+Size: :func:`estimate_usd_bytes` (a model fitted on written files, see its docstring).
 """
 
 from __future__ import annotations
 
+import re
 import warnings
 from pathlib import Path
 
 import numpy as np
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, Vt
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, Vt
 
+from .. import validation as check
 from ..obstacles import RoundedBoxes
 from ..trajectory import Trajectory
 from .files import atomic_output
-from .mesh import checker_sphere_mesh, rounded_box_mesh
+from .mesh import box_mesh, checker_sphere_mesh, rounded_box_mesh
 
 WORLD = "/World"
 LOOKS = "/World/Looks"
+SHAPES = "/World/ObstacleShapes"
 OBSTACLES = "/World/Obstacles"
 SPHERES = "/World/Spheres"
 PROTOTYPE = "/World/Spheres/Prototypes/CheckerBall"
+OBSTACLE_MATERIAL = f"{LOOKS}/Obstacle"
 
 FORMATS = ("usda", "usdc")
+SUFFIXES = (".usdc", ".usda")
 ROUNDED_BOX_SEGMENTS = 8  # edges per quarter circle of a rounded box's edges and corners
 SPHERE_LONGITUDES = 32  # prototype tessellation: smooth enough at any zoom a swarm is seen at
 SPHERE_LATITUDES = 16
+HALF_CHUNK = 1 << 16  # quaternions rounded to half together: bounds the temporary memory
+DEGREES_PER_RADIAN = 180.0 / np.pi
 
 # Colours (linear RGB) shared with the preview so that both look alike.
 SPHERE_LIGHT = (0.95, 0.62, 0.18)
 SPHERE_DARK = (0.45, 0.12, 0.05)
 OBSTACLE_COLOR = (0.42, 0.52, 0.66)
 
-# Size model fitted on measured files (see the module docstring and tests/test_export.py):
-# bytes = fixed + per_sphere * N + per_frame * F + per_sphere_frame * N * F.
+# Size model fitted on written files (usd-core 26.11, benchmarks/usd_write.py): bytes = fixed +
+# per_frame F + N (per_sphere + F per_sphere_frame) + per_box K + per_shape S (+ the rounded
+# shapes' extra). Pairs are (not spinning, spinning): .usdc stores a time sample equal to an
+# earlier one once (constant orientations, zero angular velocities), .usda writes every sample.
 _SIZE_MODEL = {
-    "usda": {"fixed": 64_500, "per_sphere": 68, "per_frame": 57, "per_sphere_frame": 131},
-    "usdc": {"fixed": 14_500, "per_sphere": 20, "per_frame": 56, "per_sphere_frame": 36},
+    "usdc": {"fixed": 15_200, "per_sphere": 20, "per_frame": 56, "position": 12,
+             "orientation": (0, 24), "velocity": 12, "angular_velocity": (0, 12),
+             "per_box": 70, "per_shape": 430, "per_rounded_shape": 5_550},
+    "usda": {"fixed": 64_500, "per_sphere": 68, "per_frame": 57, "position": 40,
+             "orientation": (24, 91), "velocity": 36, "angular_velocity": (11, 35),
+             "per_box": 400, "per_shape": 1_700, "per_rounded_shape": 28_300},
 }
 
 
@@ -84,23 +112,50 @@ class LargeOutputWarning(UserWarning):
     """
 
 
-def _format_of(path: Path) -> str:
-    fmt = path.suffix[1:]
-    if fmt not in FORMATS:
-        raise ValueError(f"path must end in .usda (text) or .usdc (binary), got {str(path)!r}")
-    return fmt
+def usd_format(path) -> str:
+    """``"usdc"`` or ``"usda"`` from a path's extension (any case: ``a.USDC`` is binary).
+
+    Raises:
+        ValueError: another extension, or an empty path.
+    """
+    text = str(path)
+    suffix = Path(text).suffix.lower()
+    if not text.strip() or suffix not in SUFFIXES:
+        raise ValueError(f"path must end in .usda (text) or .usdc (binary), got {text!r}")
+    return suffix[1:]
 
 
-def estimate_usd_bytes(n_spheres: int, n_frames: int, fmt: str) -> int:
+def _pxr_message(exc: Exception) -> str:
+    """The first message of a pxr error, without its C++ location: one line."""
+    found = re.findall(r" : '(.*?)'\s*(?:\n|$)", str(exc), flags=re.S)
+    text = found[0] if found else str(exc)
+    return " ".join(text.split())
+
+
+def estimate_usd_bytes(n_spheres: int, n_frames: int, fmt: str, *, boxes=None,
+                       spinning: bool = True, velocities: bool = False,
+                       angular_velocities: bool | None = None) -> int:
     """Estimated size of a file written by :func:`write_usd` [bytes].
 
-    A linear model fitted on measured files; obstacles add a few kilobytes each and are not
-    counted. Use it to pick ``stride`` or a ``spheres`` subset before writing.
+    A linear model fitted on written files (``benchmarks/usd_write.py``, within a few percent
+    of the bundled scenes' runs in ``.usdc``). The ``.usdc`` writer stores a time sample equal
+    to an earlier one only once, so what does not change costs nothing per frame: orientations
+    of spheres that never spin (no friction, no initial spin) and zero angular velocities. Per
+    sphere and frame, ``.usdc``: 12 B of position, 24 B of orientations (quatf + quath) when
+    spinning, 12 B each for velocities and angular velocities; ``.usda`` writes every sample as
+    text (40 B of position, 24 to 91 B of orientations, about 36 B per velocity). Per box a
+    small prim (70 B in ``.usdc``), per distinct shape its mesh (500 B sharp, 6 kB rounded).
 
     Args:
         n_spheres: spheres written.
         n_frames: recorded frames written (after ``stride``).
-        fmt: ``"usda"`` or ``"usdc"`` (a leading dot is accepted).
+        fmt: ``"usda"`` or ``"usdc"`` (a leading dot and any case are accepted).
+        boxes: the obstacles written (:class:`warpsim.RoundedBoxes`, a :class:`warpsim.Scene`),
+            or None.
+        spinning: whether orientations change over time (False: they are stored once).
+        velocities: whether ``velocities`` are written.
+        angular_velocities: whether ``angularVelocities`` are written (default: with
+            ``velocities``).
 
     Returns:
         The estimate in bytes.
@@ -108,15 +163,27 @@ def estimate_usd_bytes(n_spheres: int, n_frames: int, fmt: str) -> int:
     Raises:
         ValueError: unknown ``fmt`` or negative counts.
     """
-    key = str(fmt).lstrip(".")
+    key = str(fmt).lstrip(".").lower()
     if key not in _SIZE_MODEL:
         raise ValueError(f"fmt must be one of {FORMATS}, got {fmt!r}")
-    if n_spheres < 0 or n_frames < 0:
-        raise ValueError(f"n_spheres and n_frames must be >= 0, got {n_spheres}, {n_frames}")
-    m = _SIZE_MODEL[key]
     n, f = int(n_spheres), int(n_frames)
-    return int(m["fixed"] + m["per_sphere"] * n + m["per_frame"] * f
-               + m["per_sphere_frame"] * n * f)
+    if n < 0 or f < 0:
+        raise ValueError(f"n_spheres and n_frames must be >= 0, got {n_spheres}, {n_frames}")
+    if angular_velocities is None:
+        angular_velocities = velocities
+    m = _SIZE_MODEL[key]
+    spin = 1 if spinning else 0
+    per_sphere_frame = (m["position"] + m["orientation"][spin]
+                        + (m["velocity"] if velocities else 0)
+                        + (m["angular_velocity"][spin] if angular_velocities else 0))
+    total = m["fixed"] + m["per_frame"] * f + n * (m["per_sphere"] + f * per_sphere_frame)
+    boxes = getattr(boxes, "boxes", boxes)
+    if boxes is not None and len(boxes):
+        shape_of, unique = _shapes(boxes)
+        rounded = int(np.count_nonzero(unique[:, 3] > 0.0))
+        total += (m["per_box"] * len(boxes) + m["per_shape"] * len(unique)
+                  + m["per_rounded_shape"] * rounded)
+    return int(total)
 
 
 # --------------------------------------------------------------------------------------------
@@ -124,7 +191,7 @@ def estimate_usd_bytes(n_spheres: int, n_frames: int, fmt: str) -> int:
 
 
 def _selected(trajectory: Trajectory, stride: int, spheres) -> tuple[np.ndarray, np.ndarray]:
-    """Validated (frame rows, sphere indices) to write."""
+    """Validated (frame rows, sphere indices) to write; the last row is always kept."""
     if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
         raise ValueError(f"stride must be an integer >= 1, got {stride!r}")
     frame = np.asarray(trajectory.frame)
@@ -137,6 +204,11 @@ def _selected(trajectory: Trajectory, stride: int, spheres) -> tuple[np.ndarray,
     if trajectory.orientation.shape != (n_frames, n, 4):
         raise ValueError(f"trajectory.orientation must have shape ({n_frames}, {n}, 4), "
                          f"got {trajectory.orientation.shape}")
+    for name in ("velocity", "angular_velocity"):
+        values = getattr(trajectory, name, None)
+        if values is not None and np.shape(values) != (n_frames, n, 3):
+            raise ValueError(f"trajectory.{name} must have shape ({n_frames}, {n}, 3), "
+                             f"got {np.shape(values)}")
     if np.shape(trajectory.radius) != (n,):
         raise ValueError(f"trajectory.radius must have shape ({n},), "
                          f"got {np.shape(trajectory.radius)}")
@@ -144,20 +216,74 @@ def _selected(trajectory: Trajectory, stride: int, spheres) -> tuple[np.ndarray,
         raise ValueError(f"trajectory.dt must be > 0, got {trajectory.dt!r}")
     if (np.diff(frame) <= 0).any():
         raise ValueError("trajectory.frame must be strictly increasing")
-    rows = np.arange(0, n_frames, stride)
+    rows = np.unique(np.r_[np.arange(0, n_frames, stride), n_frames - 1])
     if spheres is None:
         return rows, np.arange(n)
-    idx = np.asarray(spheres)
-    if idx.ndim != 1 or (idx.size and not np.issubdtype(idx.dtype, np.integer)):
+    raw = np.asarray(spheres)
+    if raw.ndim != 1 or (raw.size and (raw.dtype == bool
+                                       or not np.issubdtype(raw.dtype, np.integer))):
         raise ValueError(f"spheres must be a 1-D sequence of sphere indices, got {spheres!r}")
-    idx = idx.astype(np.int64)
-    bad = (idx < 0) | (idx >= n)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"spheres[{i}] = {idx[i]} is out of range for {n} spheres")
-    if np.unique(idx).size != idx.size:
-        raise ValueError("spheres must not repeat an index")
-    return rows, idx
+    return rows, check.index_list("spheres", raw, n)
+
+
+def _shapes(boxes: RoundedBoxes) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct shapes of the boxes, in order of first use: ``(shape of each box (K,) int64,
+    shapes (S, 4) = half extents and radius)``. Equal means equal to the bit."""
+    key = np.ascontiguousarray(np.column_stack([boxes.half_extents, boxes.radius]))
+    _, first, inverse = np.unique(key.view(np.dtype((np.void, key.dtype.itemsize * 4))),
+                                  return_index=True, return_inverse=True)
+    order = np.argsort(first)  # shapes numbered by their first box
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    return rank[inverse.reshape(-1)], key[first[order]]
+
+
+def half_orientations(q, previous=None) -> np.ndarray:
+    """Quaternions (x, y, z, w) in half precision, as good as half precision allows.
+
+    The quaternions are normalised in float64, then each component is taken from the two half
+    values around it (below and above): of the 16 combinations, the one whose rotation matrix,
+    computed from the half values as they are (readers of ``orientations`` do not renormalise),
+    is nearest the true rotation in the largest entry. ``q`` and ``-q`` are the same rotation
+    and round alike; the sign is chosen so that each quaternion lies in the hemisphere of
+    ``previous`` (the half values written for the frame before), so interpolating readers turn
+    the short way.
+
+    Args:
+        q: quaternions, shape (N, 4), any non-zero length.
+        previous: half quaternions (N, 4) of the previous frame, or None.
+
+    Returns:
+        (N, 4) float16.
+    """
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    out = np.empty(q.shape, dtype=np.float16)
+    combos = (np.arange(16)[:, None] >> np.arange(4)[None, :]) & 1  # (16, 4): 0 below, 1 above
+    for start in range(0, q.shape[0], HALF_CHUNK):
+        chunk = q[start:start + HALF_CHUNK]
+        unit = chunk / np.linalg.norm(chunk, axis=1, keepdims=True)
+        near = unit.astype(np.float16)
+        near64 = near.astype(np.float64)
+        below = np.where(near64 > unit, np.nextafter(near, np.float16(-np.inf)), near)
+        above = np.where(near64 < unit, np.nextafter(near, np.float16(np.inf)), near)
+        candidates = np.where(combos[None] == 1, above[:, None, :], below[:, None, :])
+        error = np.abs(_rotation_entries(candidates.astype(np.float64))
+                       - _rotation_entries(unit)[:, None, :]).max(axis=2)
+        best = candidates[np.arange(chunk.shape[0]), np.argmin(error, axis=1)]
+        out[start:start + chunk.shape[0]] = best
+    if previous is not None:
+        flip = (out.astype(np.float64) * np.asarray(previous, dtype=np.float64)).sum(axis=1) < 0
+        out[flip] = -out[flip]
+    return out
+
+
+def _rotation_entries(p: np.ndarray) -> np.ndarray:
+    """The nine entries of the rotation matrix of unit quaternions (x, y, z, w), applied to
+    ``p`` as it is (..., 4) -> (..., 9)."""
+    x, y, z, w = p[..., 0], p[..., 1], p[..., 2], p[..., 3]
+    return np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+                     2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+                     2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1)
 
 
 def _preview_material(stage: Usd.Stage, path: str, color) -> UsdShade.Material:
@@ -202,36 +328,66 @@ def _author_sphere_prototype(stage: Usd.Stage, light, dark) -> None:
     binding.SetMaterialBindSubsetsFamilyType(UsdGeom.Tokens.partition)
 
 
-def _author_obstacles(stage: Usd.Stage, boxes: RoundedBoxes, material) -> None:
-    UsdGeom.Scope.Define(stage, OBSTACLES)
+def _spec_attribute(prim: Sdf.PrimSpec, name: str, type_name, value, *, custom: bool = False,
+                    uniform: bool = False) -> Sdf.AttributeSpec:
+    variability = Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying
+    attr = Sdf.AttributeSpec(prim, name, type_name, variability, custom)
+    attr.default = value
+    return attr
+
+
+def _author_obstacles(layer: Sdf.Layer, boxes: RoundedBoxes) -> None:
+    """Author the shapes and one Mesh prim per box, in one Sdf change block (linear in K)."""
+    T = Sdf.ValueTypeNames
+    shape_of, shapes = _shapes(boxes)
     width = max(4, len(str(len(boxes) - 1)))
+    shape_width = max(4, len(str(len(shapes) - 1)))
     color = Vt.Vec3fArray([Gf.Vec3f(*OBSTACLE_COLOR)])
-    for i in range(len(boxes)):
-        path = f"{OBSTACLES}/Box_{i:0{width}d}"
-        h = boxes.half_extents[i]
-        radius = float(boxes.radius[i])
-        if radius == 0.0:
-            gprim = UsdGeom.Cube.Define(stage, path)
-            gprim.CreateSizeAttr(2.0)
-        else:
-            gprim = UsdGeom.Mesh.Define(stage, path)
-            _author_mesh(gprim, *rounded_box_mesh(h, radius, ROUNDED_BOX_SEGMENTS))
-        gprim.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(color)
-        x, y, z = boxes.center[i]
-        gprim.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(x, y, z))
-        qx, qy, qz, qw = boxes.rotation[i]
-        gprim.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(qw, qx, qy, qz))
-        if radius == 0.0:  # the size-2 cube spans [-1, 1]: scale it to [-h, h]
-            gprim.AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*h))
-        prim = gprim.GetPrim()
-        prim.CreateAttribute("warpsim:halfExtents", Sdf.ValueTypeNames.Double3,
-                             custom=True).Set(Gf.Vec3d(*h))
-        prim.CreateAttribute("warpsim:radius", Sdf.ValueTypeNames.Double, custom=True).Set(radius)
-        _bind(prim, material)
+    order = Vt.TokenArray(["xformOp:translate", "xformOp:orient"])
+    binding_schema = Sdf.TokenListOp.Create(prependedItems=["MaterialBindingAPI"])
+    with Sdf.ChangeBlock():
+        world = layer.GetPrimAtPath(WORLD)
+        shapes_root = Sdf.PrimSpec(world, SHAPES.rsplit("/", 1)[1], Sdf.SpecifierClass)
+        shape_paths = []
+        faces = {}  # faces of every sharp (True) / rounded (False) shape: one Vt array each
+        for j, (hx, hy, hz, radius) in enumerate(shapes):
+            h = np.array([hx, hy, hz])
+            sharp = bool(radius == 0.0)
+            points, counts, indices = (box_mesh(h) if sharp else
+                                       rounded_box_mesh(h, radius, ROUNDED_BOX_SEGMENTS))
+            if sharp not in faces:
+                faces[sharp] = (Vt.IntArray.FromNumpy(counts), Vt.IntArray.FromNumpy(indices))
+            mesh = Sdf.PrimSpec(shapes_root, f"Shape_{j:0{shape_width}d}", Sdf.SpecifierDef,
+                                "Mesh")
+            pts = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points, dtype=np.float32))
+            _spec_attribute(mesh, "points", T.Point3fArray, pts)
+            _spec_attribute(mesh, "faceVertexCounts", T.IntArray, faces[sharp][0])
+            _spec_attribute(mesh, "faceVertexIndices", T.IntArray, faces[sharp][1])
+            _spec_attribute(mesh, "subdivisionScheme", T.Token, UsdGeom.Tokens.none,
+                            uniform=True)
+            _spec_attribute(mesh, "extent", T.Float3Array, UsdGeom.Mesh.ComputeExtent(pts))
+            _spec_attribute(mesh, "primvars:displayColor", T.Color3fArray, color).SetInfo(
+                "interpolation", UsdGeom.Tokens.constant)
+            mesh.SetInfo("apiSchemas", binding_schema)
+            _spec_attribute(mesh, "warpsim:halfExtents", T.Double3, Gf.Vec3d(hx, hy, hz),
+                            custom=True)
+            _spec_attribute(mesh, "warpsim:radius", T.Double, float(radius), custom=True)
+            Sdf.RelationshipSpec(mesh, "material:binding", False).targetPathList.Append(
+                Sdf.Path(OBSTACLE_MATERIAL))
+            shape_paths.append(mesh.path)
+
+        root = Sdf.PrimSpec(world, OBSTACLES.rsplit("/", 1)[1], Sdf.SpecifierDef, "Scope")
+        centers, rotations = boxes.center.tolist(), boxes.rotation.tolist()
+        for i, ((x, y, z), (qx, qy, qz, qw)) in enumerate(zip(centers, rotations, strict=True)):
+            prim = Sdf.PrimSpec(root, f"Box_{i:0{width}d}", Sdf.SpecifierDef, "Mesh")
+            prim.referenceList.Prepend(Sdf.Reference(primPath=shape_paths[shape_of[i]]))
+            _spec_attribute(prim, "xformOp:translate", T.Double3, Gf.Vec3d(x, y, z))
+            _spec_attribute(prim, "xformOp:orient", T.Quatd, Gf.Quatd(qw, qx, qy, qz))
+            _spec_attribute(prim, "xformOpOrder", T.TokenArray, order, uniform=True)
 
 
 def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
-                    idx: np.ndarray) -> None:
+                    idx: np.ndarray, velocities: bool) -> None:
     instancer = UsdGeom.PointInstancer.Define(stage, SPHERES)
     instancer.CreatePrototypesRel().SetTargets([Sdf.Path(PROTOTYPE)])
     n = idx.size
@@ -242,33 +398,56 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
     instancer.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(scales))
     instancer.GetPrim().CreateAttribute("warpsim:radius", Sdf.ValueTypeNames.DoubleArray,
                                         custom=True).Set(Vt.DoubleArray.FromNumpy(radius))
-
-    positions = instancer.CreatePositionsAttr()
-    orientations_f = instancer.CreateOrientationsfAttr()
-    orientations_h = instancer.CreateOrientationsAttr()
+    attrs = {"positions": instancer.CreatePositionsAttr(),
+             "orientationsf": instancer.CreateOrientationsfAttr(),
+             "orientations": instancer.CreateOrientationsAttr()}
+    velocity = trajectory.velocity if velocities else None
+    angular = trajectory.angular_velocity if velocities else None
+    if velocity is not None:
+        attrs["velocities"] = instancer.CreateVelocitiesAttr()
+    if angular is not None:
+        attrs["angularVelocities"] = instancer.CreateAngularVelocitiesAttr()
+    paths = {name: attr.GetPath() for name, attr in attrs.items()}
+    layer = stage.GetRootLayer()
     frames = np.asarray(trajectory.frame, dtype=np.int64)
+
+    def vec3(values):
+        return Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(values, dtype=np.float32)
+                                       .reshape(n, 3))
+
     # Vt quaternion arrays lay out each element as (i, j, k, real): warpsim's (x, y, z, w) order,
     # so the numpy rows go in unchanged (the Gf constructors, by contrast, take the real first).
-    for row in rows:
-        time = Usd.TimeCode(float(frames[row]))
-        p = np.ascontiguousarray(trajectory.position[row][idx], dtype=np.float32)
-        q = np.asarray(trajectory.orientation[row][idx])
-        positions.Set(Vt.Vec3fArray.FromNumpy(p.reshape(n, 3)), time)
-        # Each precision rounded once from the source values (no double rounding via float32).
-        orientations_f.Set(Vt.QuatfArray.FromNumpy(
-            np.ascontiguousarray(q, dtype=np.float32).reshape(n, 4)), time)
-        orientations_h.Set(Vt.QuathArray.FromNumpy(
-            np.ascontiguousarray(q, dtype=np.float16).reshape(n, 4)), time)
+    previous = None
+    with Sdf.ChangeBlock():
+        for row in rows:
+            time = float(frames[row])
+            q = np.asarray(trajectory.orientation[row])[idx]
+            layer.SetTimeSample(paths["positions"], time, vec3(trajectory.position[row][idx]))
+            # Each precision rounded from the source values (no double rounding via float32).
+            layer.SetTimeSample(paths["orientationsf"], time, Vt.QuatfArray.FromNumpy(
+                np.ascontiguousarray(q, dtype=np.float32).reshape(n, 4)))
+            previous = half_orientations(q, previous)
+            layer.SetTimeSample(paths["orientations"], time, Vt.QuathArray.FromNumpy(previous))
+            if velocity is not None:
+                layer.SetTimeSample(paths["velocities"], time, vec3(velocity[row][idx]))
+            if angular is not None:
+                degrees = np.asarray(angular[row], dtype=np.float64)[idx] * DEGREES_PER_RADIAN
+                layer.SetTimeSample(paths["angularVelocities"], time, vec3(degrees))
 
 
 def _export_layer(layer: Sdf.Layer, path: Path) -> None:
     """Write ``layer`` to ``path``, in the format named by its extension."""
-    if not layer.Export(str(path)):
+    try:
+        ok = layer.Export(str(path))
+    except Tf.ErrorException as exc:
+        raise OSError(f"USD could not write {str(path)!r}: {_pxr_message(exc)}") from None
+    if not ok:
         raise OSError(f"USD could not write {str(path)!r}")
 
 
 def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=None,
-              max_bytes: int = 2_000_000_000, warn: bool = True) -> Path:
+              velocities: bool | None = None, max_bytes: int = 2_000_000_000,
+              warn: bool = True) -> Path:
     """Write a trajectory and its scene's obstacles as a USD animation, atomically.
 
     The stage is built in memory, written under a temporary name next to ``path`` (same
@@ -277,13 +456,17 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
     for the layout and the precision of what is stored.
 
     Args:
-        path: output file; ``.usda`` (text) or ``.usdc`` (binary). Its folder must exist.
+        path: output file; ``.usda`` (text) or ``.usdc`` (binary), any case. Its folder must
+            exist.
         scene: the :class:`warpsim.Scene` simulated (its boxes are written once, never per frame),
             or its :class:`warpsim.RoundedBoxes`, or None to write the spheres alone.
         trajectory: the recorded frames; time codes are its integer ``frame`` indices.
-        stride: keep every ``stride``-th recorded frame (rows 0, stride, 2 stride, ...), >= 1.
-        spheres: indices of the spheres to write (in that order), or None for all. Their indices
-            in the swarm are stored as the instancer's ``ids``.
+        stride: keep every ``stride``-th recorded frame (rows 0, stride, 2 stride, ...) and the
+            last one, as ``Simulator.run(every=...)`` does; >= 1.
+        spheres: indices of the spheres to write (in that order, distinct), or None for all.
+            Their indices in the swarm are stored as the instancer's ``ids``.
+        velocities: write ``velocities`` and ``angularVelocities`` (True), or not (False);
+            None writes whichever the trajectory has.
         max_bytes: size above which a :class:`LargeOutputWarning` is emitted before writing
             (estimate from :func:`estimate_usd_bytes`) [bytes].
         warn: False to silence that warning.
@@ -292,24 +475,36 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
         ``path`` as a :class:`pathlib.Path`.
 
     Raises:
-        ValueError: bad extension, bad ``stride`` or ``spheres``, inconsistent trajectory.
+        ValueError: bad extension, bad ``stride`` or ``spheres``, inconsistent trajectory,
+            ``velocities=True`` for a trajectory without velocities.
         FileNotFoundError: the output folder does not exist.
-        OSError: USD failed to write the file.
+        OSError: the file cannot be written (the message names it).
     """
+    fmt = usd_format(path)
     path = Path(path)
-    fmt = _format_of(path)
     if not path.parent.is_dir():
         raise FileNotFoundError(f"folder of {str(path)!r} does not exist")
     rows, idx = _selected(trajectory, stride, spheres)
+    has_velocity = getattr(trajectory, "velocity", None) is not None
+    if velocities and not has_velocity:
+        raise ValueError("velocities=True but the trajectory has no velocity: record it with "
+                         "Simulator.run(..., velocities=True)")
+    velocities = has_velocity if velocities is None else bool(velocities)
     frames = np.asarray(trajectory.frame, dtype=np.int64)[rows]
     dt = float(trajectory.dt)
+    boxes = None if scene is None else (scene if isinstance(scene, RoundedBoxes) else scene.boxes)
 
-    estimate = estimate_usd_bytes(idx.size, rows.size, fmt)
-    if warn and estimate > max_bytes:
-        warnings.warn(LargeOutputWarning(
-            f"{str(path)!r} is estimated at {estimate / 1e6:,.0f} MB ({idx.size} spheres x "
-            f"{rows.size} frames), above max_bytes={max_bytes:,}; pass stride=k to keep every "
-            f"k-th frame or spheres=[...] to write a subset (or warn=False)"), stacklevel=2)
+    if warn:
+        q = np.asarray(trajectory.orientation)
+        spinning = bool(rows.size > 1 and (q[rows[1:]] != q[rows[0]]).any())
+        estimate = estimate_usd_bytes(idx.size, rows.size, fmt, boxes=boxes,
+                                      spinning=spinning, velocities=velocities)
+        if estimate > max_bytes:
+            warnings.warn(LargeOutputWarning(
+                f"{str(path)!r} is estimated at {estimate / 1e6:,.0f} MB ({idx.size} spheres x "
+                f"{rows.size} frames), above max_bytes={max_bytes:,}; pass stride=k to keep "
+                f"every k-th frame or spheres=[...] to write a subset (or warn=False)"),
+                stacklevel=2)
 
     stage = Usd.Stage.CreateInMemory(f"warpsim.{fmt}")
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
@@ -330,11 +525,10 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
     UsdGeom.Scope.Define(stage, LOOKS)
     light = _preview_material(stage, f"{LOOKS}/SphereLight", SPHERE_LIGHT)
     dark = _preview_material(stage, f"{LOOKS}/SphereDark", SPHERE_DARK)
-    obstacle = _preview_material(stage, f"{LOOKS}/Obstacle", OBSTACLE_COLOR)
-    if scene is not None:
-        boxes = scene if isinstance(scene, RoundedBoxes) else scene.boxes
-        _author_obstacles(stage, boxes, obstacle)
-    _author_spheres(stage, trajectory, rows, idx)
+    _preview_material(stage, OBSTACLE_MATERIAL, OBSTACLE_COLOR)
+    if boxes is not None and len(boxes):
+        _author_obstacles(stage.GetRootLayer(), boxes)
+    _author_spheres(stage, trajectory, rows, idx, velocities)
     _author_sphere_prototype(stage, light, dark)
 
     with atomic_output(path) as tmp:
@@ -346,20 +540,41 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
 # Reading
 
 
-def open_stage(path) -> Usd.Stage:
-    """Open a USD file fresh from disk (never a cached layer of an older file at that path).
-
-    Raises:
-        FileNotFoundError: no file at ``path``.
-        ValueError: USD cannot read it.
-    """
+def _open_layer(path) -> Sdf.Layer:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no USD file at {str(path)!r}")
-    layer = Sdf.Layer.OpenAsAnonymous(str(path))
+    try:
+        layer = Sdf.Layer.OpenAsAnonymous(str(path))
+    except Tf.ErrorException as exc:
+        raise ValueError(f"USD could not read {str(path)!r}: {_pxr_message(exc)}") from None
     if layer is None:
         raise ValueError(f"USD could not read {str(path)!r}")
-    return Usd.Stage.Open(layer)
+    return layer
+
+
+def _stage_of(layer: Sdf.Layer, path, spheres_only: bool = False) -> Usd.Stage:
+    try:
+        if spheres_only:
+            return Usd.Stage.OpenMasked(layer, Usd.StagePopulationMask([SPHERES]))
+        return Usd.Stage.Open(layer)
+    except Tf.ErrorException as exc:
+        raise ValueError(f"USD could not read {str(path)!r}: {_pxr_message(exc)}") from None
+
+
+def open_stage(path, *, spheres_only: bool = False) -> Usd.Stage:
+    """Open a USD file fresh from disk (never a cached layer of an older file at that path).
+
+    Args:
+        path: the file.
+        spheres_only: compose only ``/World/Spheres`` (fast to open whatever the number of
+            obstacles).
+
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        ValueError: USD cannot read it (corrupt or not USD); one line naming the file.
+    """
+    return _stage_of(_open_layer(path), path, spheres_only)
 
 
 def sphere_instancer(stage: Usd.Stage, path="") -> UsdGeom.PointInstancer:
@@ -381,9 +596,17 @@ def recorded_frames(instancer: UsdGeom.PointInstancer) -> np.ndarray:
     return np.rint(times).astype(np.int64)
 
 
-def instancer_state(instancer: UsdGeom.PointInstancer, frame: int
-                    ) -> tuple[np.ndarray, np.ndarray]:
-    """Positions (N, 3) float32 [m] and orientations (N, 4) float32 (x, y, z, w) at ``frame``."""
+def _vec3_at(attr: Usd.Attribute, time: Usd.TimeCode, n: int) -> np.ndarray | None:
+    if not attr or not attr.HasAuthoredValue():
+        return None
+    value = attr.Get(time)
+    return None if value is None else np.asarray(value, dtype=np.float32).reshape(n, 3)
+
+
+def instancer_state(instancer: UsdGeom.PointInstancer, frame: int) -> dict[str, np.ndarray]:
+    """What is stored at ``frame``: ``position`` (N, 3) float32 [m], ``orientation`` (N, 4)
+    float32 (x, y, z, w), and when authored ``velocity`` (N, 3) float32 [m/s] and
+    ``angular_velocity`` (N, 3) float64 [rad/s]."""
     time = Usd.TimeCode(float(frame))
     position = np.asarray(instancer.GetPositionsAttr().Get(time), dtype=np.float32).reshape(-1, 3)
     n = position.shape[0]
@@ -395,7 +618,14 @@ def instancer_state(instancer: UsdGeom.PointInstancer, frame: int
         orientation = np.tile(np.array([0, 0, 0, 1], dtype=np.float32), (n, 1))
     else:  # Vt quaternion arrays are laid out (i, j, k, real) = (x, y, z, w)
         orientation = np.asarray(value, dtype=np.float32).reshape(-1, 4)
-    return position, orientation
+    state = {"position": position, "orientation": orientation}
+    velocity = _vec3_at(instancer.GetVelocitiesAttr(), time, n)
+    if velocity is not None:
+        state["velocity"] = velocity
+    degrees = _vec3_at(instancer.GetAngularVelocitiesAttr(), time, n)
+    if degrees is not None:
+        state["angular_velocity"] = degrees.astype(np.float64) / DEGREES_PER_RADIAN
+    return state
 
 
 def sphere_radii(instancer: UsdGeom.PointInstancer) -> np.ndarray:
@@ -407,35 +637,103 @@ def sphere_radii(instancer: UsdGeom.PointInstancer) -> np.ndarray:
     return np.array(scales, dtype=np.float64).reshape(-1, 3)[:, 0]
 
 
+def _stage_dt(stage: Usd.Stage) -> float:
+    world = stage.GetPrimAtPath(WORLD)
+    dt_attr = world.GetAttribute("warpsim:dt") if world else None
+    return float(dt_attr.Get()) if dt_attr else 1.0 / stage.GetTimeCodesPerSecond()
+
+
+def _trajectory(stage: Usd.Stage, instancer, frames: np.ndarray) -> Trajectory:
+    states = [instancer_state(instancer, f) for f in frames]
+    radius = sphere_radii(instancer)
+    n, f = radius.size, frames.size
+
+    def stacked(key, width):
+        if any(key not in s for s in states):
+            return None
+        return np.stack([s[key] for s in states]).reshape(f, n, width)
+
+    return Trajectory(frame=frames, dt=_stage_dt(stage), position=stacked("position", 3),
+                      orientation=stacked("orientation", 4), radius=radius,
+                      velocity=stacked("velocity", 3),
+                      angular_velocity=stacked("angular_velocity", 3))
+
+
 def read_usd(path) -> Trajectory:
     """Read back the trajectory of a file written by :func:`write_usd`.
 
     Returns exactly what is stored (module docstring): ``frame`` (F,) int64 are the time codes
     of the written frames (after ``stride``), ``position`` (F, N, 3) float32 [m],
     ``orientation`` (F, N, 4) float32 (x, y, z, w) from ``orientationsf`` (half precision from
-    ``orientations`` if a file lacks it), ``radius`` (N,) float64 [m] and ``dt`` [s] exact. With a
-    ``spheres`` subset, N is the subset in the order written (its swarm indices are the
-    instancer's ``ids``).
+    ``orientations`` if a file lacks it), ``radius`` (N,) float64 [m] and ``dt`` [s] exact;
+    ``velocity`` (F, N, 3) float32 [m/s] and ``angular_velocity`` (F, N, 3) float64 [rad/s]
+    when the file has them, else None. With a ``spheres`` subset, N is the subset in the order
+    written (its swarm indices are the instancer's ``ids``).
 
     Raises:
         FileNotFoundError: no file at ``path``.
         ValueError: not a USD file, or not one written by warpsim.
     """
-    stage = open_stage(path)
+    stage = open_stage(path, spheres_only=True)
     instancer = sphere_instancer(stage, path)
     frames = recorded_frames(instancer)
     if frames.size == 0:
         raise ValueError(f"{str(path)!r} has no time-sampled sphere positions")
-    states = [instancer_state(instancer, f) for f in frames]
-    radius = sphere_radii(instancer)
-    n = radius.size
-    world = stage.GetPrimAtPath(WORLD)
-    dt_attr = world.GetAttribute("warpsim:dt") if world else None
-    dt = float(dt_attr.Get()) if dt_attr else 1.0 / stage.GetTimeCodesPerSecond()
-    return Trajectory(frame=frames, dt=dt,
-                      position=np.stack([s[0] for s in states]).reshape(frames.size, n, 3),
-                      orientation=np.stack([s[1] for s in states]).reshape(frames.size, n, 4),
-                      radius=radius)
+    return _trajectory(stage, instancer, frames)
+
+
+def frame_label(frames: np.ndarray) -> str:
+    """``"recorded frames are 0..300 (301 frames)"``, with ``every K`` when regular."""
+    steps = np.unique(np.diff(frames))
+    regular = f", every {steps[0]}" if steps.size == 1 and steps[0] > 1 else ""
+    return f"recorded frames are {frames[0]}..{frames[-1]} ({frames.size} frames{regular})"
+
+
+def resolve_frame(frames: np.ndarray, frame, path="") -> int:
+    """The recorded frame meant by ``frame``: a recorded frame index (time code), or a negative
+    number counting recorded frames from the end (-1 is the last, as in Python).
+
+    Raises:
+        ValueError: not an integer, or no such recorded frame (the message gives the range).
+    """
+    if frames.size == 0:
+        raise ValueError(f"frame {frame!r}: {str(path)!r} has no recorded frames")
+    available = frame_label(frames)
+    if isinstance(frame, bool) or not isinstance(frame, (int, np.integer)):
+        raise ValueError(f"frame must be an integer frame index, got {frame!r}; {available}")
+    frame = int(frame)
+    if frame < 0:
+        if -frame > frames.size:
+            raise ValueError(f"frame {frame}: {str(path)!r} has only {frames.size} recorded "
+                             f"frames; {available}")
+        return int(frames[frame])
+    if frame not in set(frames.tolist()):
+        raise ValueError(f"frame {frame!r} is not a recorded frame of {str(path)!r}: "
+                         f"{available}")
+    return frame
+
+
+def read_usd_frame(path, frame: int) -> Trajectory:
+    """One recorded frame of a file written by :func:`write_usd`, as a one-record trajectory.
+
+    Args:
+        path: the file.
+        frame: a recorded frame index (time code), e.g. ``trajectory.frame[k]``, or a negative
+            number counting recorded frames from the end (-1: the last).
+
+    Returns:
+        A :class:`warpsim.Trajectory` with ``frame`` of shape (1,) and arrays of shape (1, N, .),
+        as :func:`read_usd` returns them.
+
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        ValueError: no such recorded frame (the message gives the available range), or not a
+            warpsim file.
+    """
+    stage = open_stage(path, spheres_only=True)
+    instancer = sphere_instancer(stage, path)
+    chosen = resolve_frame(recorded_frames(instancer), frame, path)
+    return _trajectory(stage, instancer, np.array([chosen], dtype=np.int64))
 
 
 def read_usd_boxes(path) -> RoundedBoxes | None:
@@ -450,10 +748,63 @@ def read_usd_boxes(path) -> RoundedBoxes | None:
 
     Raises:
         FileNotFoundError: no file at ``path``.
-        ValueError: an obstacle prim lacks the warpsim attributes.
+        ValueError: not a USD file, or an obstacle prim lacks the warpsim attributes.
     """
-    stage = open_stage(path)
-    return boxes_of_stage(stage, path)
+    layer = _open_layer(path)
+    plain = _boxes_of_layer(layer, path)
+    if plain is not _COMPOSE:
+        return plain
+    return boxes_of_stage(_stage_of(layer, path), path)
+
+
+_COMPOSE = object()  # the layer holds more than warpsim writes: read through composition
+_LAYOUT_FIELDS = frozenset({"specifier", "typeName", "references"})  # a box prim's metadata
+_BOX_PROPERTIES = frozenset({"xformOp:translate", "xformOp:orient", "xformOpOrder"})
+
+
+def _boxes_of_layer(layer: Sdf.Layer, path) -> RoundedBoxes | None | object:
+    """The boxes read straight from the layer's specs, as :func:`write_usd` lays them out (a
+    box prim with its transform, an internal reference to its shape carrying the warpsim
+    attributes): the same values composition gives, without composing 1e5 prims. Returns
+    ``_COMPOSE`` for anything else (sublayers, overrides, other arcs, edited files)."""
+    if layer.subLayerPaths:
+        return _COMPOSE
+    root = layer.GetPrimAtPath(OBSTACLES)
+    if root is None:
+        return None
+    children = list(root.nameChildren)
+    if not children:
+        return None
+    shapes: dict[str, tuple] = {}
+    center, rotation, half, radius = [], [], [], []
+    for prim in children:
+        refs = prim.referenceList.prependedItems
+        if (len(refs) != 1 or refs[0].assetPath or not _LAYOUT_FIELDS.issuperset(
+                prim.ListInfoKeys()) or not _BOX_PROPERTIES.issuperset(prim.properties.keys())):
+            return _COMPOSE  # other arcs or metadata, or properties of its own (overrides)
+        target = str(refs[0].primPath)
+        if target not in shapes:
+            shape = layer.GetPrimAtPath(target)
+            attrs = shape.attributes if shape is not None else {}
+            if "warpsim:halfExtents" not in attrs or "warpsim:radius" not in attrs:
+                return _COMPOSE
+            h, r = attrs["warpsim:halfExtents"].default, attrs["warpsim:radius"].default
+            if h is None or r is None:
+                return _COMPOSE
+            shapes[target] = (tuple(h), float(r))
+        attrs = prim.attributes
+        t, q = attrs["xformOp:translate"].default, attrs["xformOp:orient"].default
+        if t is None or q is None:
+            return _COMPOSE
+        center.append(tuple(t))
+        rotation.append((*q.GetImaginary(), q.GetReal()))
+        h, r = shapes[target]
+        half.append(h)
+        radius.append(r)
+    return RoundedBoxes(center=np.array(center, dtype=np.float64),
+                        half_extents=np.array(half, dtype=np.float64),
+                        rotation=np.array(rotation, dtype=np.float64),
+                        radius=np.array(radius, dtype=np.float64))
 
 
 def boxes_of_stage(stage: Usd.Stage, path="") -> RoundedBoxes | None:
@@ -463,22 +814,26 @@ def boxes_of_stage(stage: Usd.Stage, path="") -> RoundedBoxes | None:
         return None
     center, rotation, half, radius = [], [], [], []
     for prim in root.GetChildren():
-        h_attr, r_attr = prim.GetAttribute("warpsim:halfExtents"), prim.GetAttribute(
-            "warpsim:radius")
+        h_attr = prim.GetAttribute("warpsim:halfExtents")
+        r_attr = prim.GetAttribute("warpsim:radius")
         if not (h_attr and r_attr):
             raise ValueError(f"{str(path)!r}: obstacle {prim.GetPath()} lacks warpsim:halfExtents "
                              f"or warpsim:radius")
-        ops = {op.GetOpType(): op.Get() for op in UsdGeom.Xformable(prim).GetOrderedXformOps()}
-        t = ops.get(UsdGeom.XformOp.TypeTranslate, Gf.Vec3d(0.0))
-        q = ops.get(UsdGeom.XformOp.TypeOrient, Gf.Quatd(1.0))
+        t = prim.GetAttribute("xformOp:translate").Get()
+        q = prim.GetAttribute("xformOp:orient").Get()
+        t = Gf.Vec3d(0.0) if t is None else t
+        q = Gf.Quatd(1.0) if q is None else q
         center.append(tuple(t))
         rotation.append((*q.GetImaginary(), q.GetReal()))
         half.append(tuple(h_attr.Get()))
         radius.append(float(r_attr.Get()))
     if not center:
         return None
-    return RoundedBoxes(center=center, half_extents=half, rotation=rotation, radius=radius)
+    return RoundedBoxes(center=np.array(center, dtype=np.float64),
+                        half_extents=np.array(half, dtype=np.float64),
+                        rotation=np.array(rotation, dtype=np.float64),
+                        radius=np.array(radius, dtype=np.float64))
 
 
-__all__ = ["LargeOutputWarning", "estimate_usd_bytes", "read_usd", "read_usd_boxes", "write_usd"]
-
+__all__ = ["LargeOutputWarning", "estimate_usd_bytes", "half_orientations", "read_usd",
+           "read_usd_boxes", "read_usd_frame", "write_usd"]

@@ -72,13 +72,22 @@ def test_run_default_output_name_in_working_directory(tmp_path):
     (("preview", "missing.usdc", "-o", "x.png"), "missing.usdc"),
     (("frobnicate",), "invalid choice"),
 ])
-def test_errors_are_one_line_and_nonzero(args, message, tmp_path):
-    out = warpsim(*args, cwd=tmp_path)
-    assert out.returncode != 0
-    lines = [line for line in out.stderr.splitlines() if not line.startswith("Warp CUDA")]
-    assert len(lines) == 1, out.stderr
+def test_errors_are_one_line_and_nonzero(args, message, tmp_path, capsys, monkeypatch):
+    """In this process (the entry point the console script calls), for speed; the subprocess
+    tests below check the real standard error, Warp's native output included."""
+    from warpsim.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    try:
+        code = main(list(args))
+    except SystemExit as exit_:  # argparse's usage errors
+        code = exit_.code
+    assert code != 0
+    err = capsys.readouterr().err
+    lines = err.splitlines()
+    assert len(lines) == 1, err
     assert lines[0].startswith("warpsim: error:") and message in lines[0], lines[0]
-    assert "Traceback" not in out.stderr
+    assert "Traceback" not in err
     assert list(tmp_path.iterdir()) == []  # nothing written, no partial file
 
 
@@ -107,3 +116,195 @@ def test_unwritable_output_leaves_nothing(tmp_path):
 def test_debug_shows_the_traceback(tmp_path):
     out = warpsim("--debug", "run", "no-such-scene", cwd=tmp_path)
     assert out.returncode != 0 and "Traceback" in out.stderr
+
+
+# --------------------------------------------------------------------------------------------
+# In-process runs of the same entry point (faster than a subprocess), for the options
+
+
+def cli(capsys, *args, cwd=None, monkeypatch=None):
+    """``warpsim ARGS`` in this process: (exit code, stdout, stderr)."""
+    from warpsim.cli import main
+
+    if cwd is not None:
+        monkeypatch.chdir(cwd)
+    code = main([str(a) for a in args])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def one_error_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("warpsim: error:") and "Traceback" not in err
+    return lines[0]
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as info:
+        cli(capsys, "--version")
+    assert info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"warpsim {ws.__version__}"
+
+
+def test_output_names_checked_before_simulating(tmp_path, capsys):
+    for output, message in (("", "empty"), (tmp_path / "x.obj", "must end in .usdc or .usda"),
+                            ("/proc/x.usdc", "cannot write output '/proc/x.usdc'")):
+        code, out, err = cli(capsys, "run", "wedge", "-n", 4, "--frames", 2, "-o", output)
+        assert code != 0 and message in one_error_line(err)
+        assert "simulated" not in out  # refused before the run
+    code, out, err = cli(capsys, "run", "wedge", "-n", 4, "--frames", 2, "-o",
+                         tmp_path / "w.USDC", "--no-progress")
+    assert code == 0, err
+    assert [p.name for p in tmp_path.iterdir()] == ["w.USDC"]
+    assert (tmp_path / "w.USDC").read_bytes()[:8] == b"PXR-USDC"
+
+
+def test_size_estimate_checked_before_simulating(tmp_path, capsys):
+    code, out, err = cli(capsys, "run", "room", "-n", 50, "--frames", 100, "-o",
+                         tmp_path / "r.usdc", "--max-bytes", 1000)
+    line = one_error_line(err)
+    assert code != 0 and "--max-bytes" in line and "MB" in line
+    assert "simulated" not in out and list(tmp_path.iterdir()) == []
+
+
+def test_frame_range_and_sphere_subset(tmp_path, capsys):
+    usd = tmp_path / "w.usda"
+    code, out, err = cli(capsys, "run", "wedge", "-n", 20, "--frames", 30, "--seed", 2,
+                         "--start", 10, "--end", 20, "--every", 4, "--spheres", "3:9:2",
+                         "-o", usd, "--no-progress")
+    assert code == 0, err
+    traj = ws.export.read_usd(usd)
+    np.testing.assert_array_equal(traj.frame, [10, 14, 18, 20])
+    scene = ws.Scene.load("wedge")
+    expected = ws.Simulator(scene, scene.spawn(n=20, seed=2)).run(20)
+    np.testing.assert_array_equal(traj.position,
+                                  expected.position[[10, 14, 18, 20]][:, [3, 5, 7]]
+                                  .astype(np.float32))
+    assert "simulated 20 frames" in out  # the run stopped at --end
+    code, out, err = cli(capsys, "run", "wedge", "-n", 20, "--frames", 3, "--spheres", "0,19,4",
+                         "-o", usd, "--no-progress")
+    assert code == 0, err
+    assert ws.export.read_usd(usd).sphere_count == 3
+    for args, message in ((("--spheres", "5"), "range A:B or a list"),
+                          (("--spheres", "0,20"), "out of range"),
+                          (("--spheres", "30:40"), "selects no sphere"),
+                          (("--start", 5, "--end", 5), "before --end"),
+                          (("--end", 9, "--frames", 3), "past --frames")):
+        code, _, err = cli(capsys, "run", "wedge", "-n", 20, "-o", usd, *args)
+        assert code != 0 and message in one_error_line(err)
+
+
+def test_lossy_scene_reports_energy_lost_not_drift(tmp_path, capsys):
+    code, out, err = cli(capsys, "run", "staircase", "-n", 20, "--frames", 60, "-o",
+                         tmp_path / "s.usdc", "--no-progress")
+    assert code == 0, err
+    assert "energy lost at contacts:" in out and "energy drift" not in out
+    assert "energy_retention = 0.8" in out
+
+
+def test_preview_frames_from_the_end_and_image_formats(tmp_path, capsys):
+    usd = tmp_path / "w.usdc"
+    assert cli(capsys, "run", "wedge", "-n", 6, "--frames", 4, "-o", usd, "--no-progress")[0] == 0
+    code, out, err = cli(capsys, "preview", usd, "--frame", -1, "-o", tmp_path / "a.jpg",
+                         "--size", "64x48")
+    assert code == 0, err
+    assert "frame 4" in out
+    with Image.open(tmp_path / "a.jpg") as image:
+        assert image.format == "JPEG" and image.size == (64, 48)
+    code, out, err = cli(capsys, "preview", usd, "--frame", -5, "-o", tmp_path / "b.png",
+                         "--size", "64x48", "--azimuth", 120, "--elevation", 10)
+    assert code == 0 and "frame 0" in out, err
+    for args, message in ((("--frame", -6, "-o", tmp_path / "c.png"), "only 5"),
+                          (("--frame", 2, "-o", tmp_path / "c.xyz"), "must end in"),
+                          ((), "-o IMAGE or --movie")):
+        code, _, err = cli(capsys, "preview", usd, *args)
+        assert code != 0 and message in one_error_line(err)
+
+
+def test_preview_movie(tmp_path, capsys):
+    pytest.importorskip("imageio")
+    usd = tmp_path / "w.usdc"
+    assert cli(capsys, "run", "wedge", "-n", 6, "--frames", 6, "-o", usd, "--no-progress")[0] == 0
+    code, out, err = cli(capsys, "preview", usd, "--movie", tmp_path / "w.gif", "--every", 2,
+                         "--size", "48x32", "--no-progress")
+    assert code == 0, err
+    with Image.open(tmp_path / "w.gif") as gif:  # frames 0, 2, 4, 6 of dt = 1/60 s
+        assert gif.size == (48, 32)
+        total = 0
+        for k in range(gif.n_frames):  # Pillow merges identical frames, adding their durations
+            gif.seek(k)
+            total += gif.info["duration"]
+    assert total == pytest.approx(4 * 2 * 1000 / 60, abs=4 * 10)
+
+
+def test_velocities_and_events_options(tmp_path, capsys):
+    """Motion data and contact events, where this simulator records them."""
+    import inspect
+
+    params = inspect.signature(ws.Simulator.run).parameters
+    usd = tmp_path / "w.usdc"
+    if "velocities" in params:
+        code, out, err = cli(capsys, "run", "wedge", "-n", 6, "--frames", 5, "--seed", 3,
+                             "-o", usd, "--velocities", "--no-progress")
+        assert code == 0, err
+        traj = ws.export.read_usd(usd)
+        scene = ws.Scene.load("wedge")
+        expected = ws.Simulator(scene, scene.spawn(n=6, seed=3)).run(5, velocities=True)
+        # the file holds the simulator's velocities at each recorded frame, to the float32 bit
+        np.testing.assert_array_equal(traj.velocity, expected.velocity.astype(np.float32))
+        np.testing.assert_allclose(traj.angular_velocity, expected.angular_velocity,
+                                   rtol=1e-6, atol=1e-30)
+    else:
+        code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--velocities")
+        assert code != 0 and "does not record velocities" in one_error_line(err)
+    if "events" in params:
+        pytest.importorskip("pyarrow")
+        events = tmp_path / "hits.parquet"
+        code, out, err = cli(capsys, "run", "wedge", "-n", 6, "--frames", 5, "-o", usd,
+                             "--events", events, "--no-progress")
+        assert code == 0, err
+        assert len(ws.events.ContactEvents.read_parquet(events)) > 0
+    else:
+        code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--events",
+                           tmp_path / "hits.parquet")
+        assert code != 0 and "does not record contact events" in one_error_line(err)
+    code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--events", tmp_path / "hits.csv")
+    assert code != 0 and ".parquet" in one_error_line(err)
+    assert "hits.parquet" not in [p.name for p in tmp_path.iterdir()] or "events" in params
+
+
+def test_warp_start_up_chatter_is_silenced_and_bad_device_is_one_line(tmp_path):
+    out = warpsim("run", "wedge", "-n", 4, "--frames", 2, "-o", tmp_path / "w.usdc",
+                  "--no-progress")
+    assert out.returncode == 0, out.stderr
+    assert "Warp" not in out.stderr, out.stderr
+    import warp as wp
+
+    if not wp.is_cuda_available():
+        out = warpsim("run", "wedge", "-n", 4, "--device", "cuda", "-o", tmp_path / "x.usdc")
+        assert out.returncode != 0
+        assert "device 'cuda' is not available" in one_error_line(out.stderr)
+
+
+def test_forwarded_commands_show_their_own_usage():
+    out = warpsim("bench", "--help")
+    assert out.returncode == 0, out.stderr
+    first = out.stdout.splitlines()[0]
+    if "python -m warpsim.benchmark" in first:
+        pytest.skip("warpsim.benchmark sets its own prog and takes no prog argument")
+    assert first.startswith("usage: warpsim bench")
+
+
+def test_accuracy_is_forwarded(capsys):
+    import importlib.util
+
+    from warpsim.cli import main
+
+    if importlib.util.find_spec("warpsim.accuracy") is None:
+        assert main(["accuracy", "--help"]) != 0
+        assert "accuracy study is not part" in one_error_line(capsys.readouterr().err)
+    else:
+        with pytest.raises(SystemExit) as info:
+            main(["accuracy", "--help"])
+        assert info.value.code == 0

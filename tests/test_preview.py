@@ -188,3 +188,63 @@ def test_failed_png_write_keeps_the_existing_file(tmp_path, monkeypatch):
         render_preview(usd, 0, png, size=SMALL)
     assert png.read_bytes() == b"old picture"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["anim.usdc", "frame.png"]
+
+
+def test_image_format_follows_the_extension(tmp_path):
+    """``.jpg`` writes a JPEG, ``.PNG`` a PNG; an extension Pillow cannot write is refused
+    before anything is drawn, and nothing is left behind."""
+    usd = write_usd(tmp_path / "anim.usdc", floor_scene(), one_frame([0.0, 0.5, 0.0], [0.2]))
+    for name, fmt in (("frame.jpg", "JPEG"), ("frame.jpeg", "JPEG"), ("frame.PNG", "PNG"),
+                      ("frame.webp", "WEBP")):
+        out = render_preview(usd, 0, tmp_path / name, size=SMALL)
+        with Image.open(out) as image:
+            assert image.format == fmt and image.size == SMALL
+    for bad in ("frame.xyz", "frame", "frame.usdc"):
+        with pytest.raises(ValueError, match="must end in"):
+            render_preview(usd, 0, tmp_path / bad, size=SMALL)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "anim.usdc", "frame.PNG", "frame.jpeg", "frame.jpg", "frame.webp"]
+
+
+def test_negative_frame_counts_from_the_end(tmp_path):
+    traj = warpsim.Trajectory(frame=np.array([10, 12, 14]), dt=0.01,
+                              position=np.array([[[-1.0, 0.5, 0.0]], [[0.0, 0.5, 0.0]],
+                                                 [[1.0, 0.5, 0.0]]]),
+                              orientation=np.tile([0.0, 0.0, 0.0, 1.0], (3, 1, 1)),
+                              radius=np.array([0.3]))
+    usd = write_usd(tmp_path / "anim.usdc", floor_scene(), traj)
+    render_preview(usd, -1, tmp_path / "last.png", size=SMALL)
+    render_preview(usd, 14, tmp_path / "fourteen.png", size=SMALL)
+    render_preview(usd, -3, tmp_path / "first.png", size=SMALL)
+    last = np.asarray(Image.open(tmp_path / "last.png"))
+    assert np.array_equal(last, np.asarray(Image.open(tmp_path / "fourteen.png")))
+    assert not np.array_equal(last, np.asarray(Image.open(tmp_path / "first.png")))
+    with pytest.raises(ValueError, match="only 3"):
+        render_preview(usd, -4, tmp_path / "x.png", size=SMALL)
+
+
+def test_view_angles_move_the_camera():
+    lo, hi = np.array([-1.0, -1.0, -1.0]), np.array([1.0, 1.0, 1.0])
+    side = Camera.framing(lo, hi, *SMALL, azimuth=90.0, elevation=0.0)
+    np.testing.assert_allclose(side.forward, [-1.0, 0.0, 0.0], atol=1e-12)  # from +x
+    top = Camera.framing(lo, hi, *SMALL, azimuth=0.0, elevation=80.0)
+    assert top.forward[1] < -0.98
+    for azimuth, elevation in ((0.0, 90.0), (float("nan"), 0.0), ("a", 0.0)):
+        with pytest.raises(ValueError, match="azimuth|elevation"):
+            Camera.framing(lo, hi, *SMALL, azimuth=azimuth, elevation=elevation)
+
+
+def test_renderer_draws_what_draw_frame_draws():
+    """The renderer keeps the obstacles drawn once; each frame equals a fresh drawing with the
+    same camera bounds."""
+    from warpsim.export.preview import Renderer, scene_bounds
+
+    boxes = floor_scene().boxes
+    frames = [np.array([[0.0, 0.4, 0.0]]), np.array([[1.0, 1.2, 0.5]])]
+    lo, hi = scene_bounds(boxes, np.stack(frames), [0.2])
+    renderer = Renderer(boxes, lo, hi, size=SMALL)
+    for position in frames:
+        image = renderer.draw(position, [[0, 0, 0, 1]], [0.2])
+        fresh, _ = draw_frame(boxes, position, [[0, 0, 0, 1]], [0.2], size=SMALL,
+                              bounds=(lo, hi))
+        assert np.array_equal(np.asarray(image), np.asarray(fresh))

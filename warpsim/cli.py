@@ -1,20 +1,34 @@
-"""The ``warpsim`` command line: run a scene to USD, list scenes, preview a frame, benchmark.
+"""The ``warpsim`` command line: run a scene to USD, list scenes, preview a frame or a movie,
+benchmark, measure accuracy.
 
 Errors are one line on standard error and a non-zero exit code; ``--debug`` (or the environment
-variable ``WARPSIM_DEBUG=1``) shows the traceback instead.
+variable ``WARPSIM_DEBUG=1``) shows the traceback instead, and Warp's own start-up messages.
+Everything that can be checked before a simulation is checked before it starts: the output
+paths can be written, the optional packages are there, the file will not be too large.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import inspect
 import os
 import sys
-from pathlib import Path
 
 import numpy as np
 
 EXIT_ERROR = 1
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+USD_SUFFIXES = (".usdc", ".usda")
+EVENTS_SUFFIXES = (".parquet",)
+#: Energy floors below this [J] are treated as zero when scaling relative energy figures.
+ENERGY_SCALE_FLOOR = 1e-30
+#: Default for ``run --velocities``: off. Measured (benchmarks/usd_write.py): velocities add
+#: 12 B per sphere-frame in .usdc (24 B with spin) to the 12 B of a non-spinning sphere's
+#: position, doubling the per-frame data of most bundled scenes (the default room run, 400
+#: spheres x 301 frames: 1.6 MB -> 3.0 MB), a cost only motion-blurred renders need.
+VELOCITIES_DEFAULT = False
 
 
 class _Parser(argparse.ArgumentParser):
@@ -33,15 +47,55 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def sphere_selection(text: str, count: int) -> np.ndarray:
+    """Sphere indices from ``A:B`` / ``A:B:STEP`` (Python slice, ends optional) or ``1,5,9``.
+
+    A bare integer is refused (``-n`` is how many spheres to simulate; ``7:8`` or ``7,`` selects
+    sphere 7), so that neither is taken for the other.
+
+    Raises:
+        ValueError: a malformed selection, or indices out of ``range(count)``, naming them.
+    """
+    from . import validation as check
+
+    text = text.strip()
+    try:
+        if ":" in text:
+            parts = [int(p) if p.strip() else None for p in text.split(":")]
+            if len(parts) > 3:
+                raise ValueError
+            selected = np.arange(count)[slice(*parts)]
+            if selected.size == 0:
+                raise ValueError(f"--spheres {text!r} selects no sphere of {count}")
+            return selected
+        if "," in text:
+            items = [int(p) for p in text.split(",") if p.strip()]
+            return check.index_list("--spheres", items, count)
+    except ValueError as exc:
+        if str(exc):
+            raise
+    raise ValueError(f"--spheres takes a range A:B or a list 1,5,9 of sphere indices, got "
+                     f"{text!r} (-n sets how many spheres to simulate)")
+
+
 def build_parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     parser = _Parser(prog="warpsim", description=__doc__.splitlines()[0])
-    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    parser.add_argument("--version", action="version", version=f"warpsim {__version__}")
+    parser.add_argument("--debug", action="store_true",
+                        help="show tracebacks on errors, and Warp's start-up messages")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="simulate a scene and write a USD animation")
     run.add_argument("scene", help="bundled scene name (see 'warpsim scenes') or a .toml path")
-    run.add_argument("-n", "--spheres", type=int, help="number of spheres (default: the scene's)")
+    run.add_argument("-n", "--count", type=int, help="number of spheres (default: the scene's)")
     run.add_argument("--frames", type=int, help="frames to simulate (default: the scene's)")
+    run.add_argument("--start", type=int, default=0,
+                     help="first frame written (the run still starts at frame 0)")
+    run.add_argument("--end", type=int,
+                     help="last frame written; the run stops there (default: --frames)")
+    run.add_argument("--spheres", help="write only these spheres: A:B, A:B:STEP or 1,5,9")
     run.add_argument("--dt", type=float, help="time step [s] (default: the scene's)")
     run.add_argument("--seed", type=int, help="emitter seed (default: the scene's)")
     run.add_argument("--max-bounces", type=int, help="contacts per sphere per frame")
@@ -49,23 +103,104 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--precision", default="float32", choices=("float32", "float64"))
     run.add_argument("--broad-phase", default="auto", choices=("auto", "bvh", "brute"),
                      help="candidate boxes per sphere: a BVH or all boxes (same results)")
+    run.add_argument("--motion", choices=("linear", "ballistic"),
+                     help="path within a frame: the chord or the exact parabola")
+    run.add_argument("--workers", type=int, help="CPU threads stepping the swarm")
     run.add_argument("-o", "--output", help="output .usdc or .usda (default: SCENE.usdc)")
     run.add_argument("--every", type=int, default=1, help="record one frame in EVERY")
+    run.add_argument("--velocities", action=argparse.BooleanOptionalAction,
+                     default=VELOCITIES_DEFAULT,
+                     help="write velocities and angular velocities for motion blur (off by "
+                          "default: about doubles the file)")
+    run.add_argument("--events", metavar="EVENTS.parquet",
+                     help="write one row per contact to a Parquet file (needs pyarrow)")
+    run.add_argument("--events-capacity", type=int,
+                     help="contacts the event buffer holds per recorded frame")
+    run.add_argument("--error-sample", type=int, metavar="K",
+                     help="after the run, compare K spheres with the exact reference")
     run.add_argument("--max-bytes", type=float, default=2e9,
-                     help="warn before writing a file larger than this estimate [bytes]")
+                     help="refuse (before simulating) a file estimated larger [bytes]")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.add_argument("--dask", nargs="?", const="local", metavar="ADDRESS",
+                     help="run in shards on a Dask cluster: a LocalCluster here, or the "
+                          "scheduler at ADDRESS (needs warpsim[dask]; README 'On a cluster')")
+    run.add_argument("--shards", type=int, help="with --dask: shards (default: 4 per worker)")
+    run.add_argument("--block", type=int,
+                     help="with --dask: spheres per block of the sharded draw (default 1024)")
 
     sub.add_parser("scenes", help="list the bundled scenes")
 
-    prev = sub.add_parser("preview", help="draw one frame of a warpsim USD file to a PNG")
+    prev = sub.add_parser("preview",
+                          help="draw a frame of a warpsim USD file to an image, or a movie")
     prev.add_argument("usd", help="a .usdc/.usda written by 'warpsim run'")
-    prev.add_argument("--frame", type=int, default=None, help="frame (default: the last)")
-    prev.add_argument("-o", "--output", required=True, help="output .png")
+    prev.add_argument("--frame", type=int, default=-1,
+                      help="recorded frame; negative counts from the end (default: -1, the last)")
+    prev.add_argument("-o", "--output", help="output image (.png, .jpg, ...)")
+    prev.add_argument("--movie", metavar="OUT.mp4", help="write a movie (.mp4 or .gif) instead")
+    prev.add_argument("--every", type=int, default=1,
+                      help="movie: draw one recorded frame in EVERY")
     prev.add_argument("--size", type=_size, default=(960, 540), help="WIDTHxHEIGHT pixels")
+    prev.add_argument("--azimuth", type=float, default=45.0,
+                      help="view direction around +y from +z towards +x [deg]")
+    prev.add_argument("--elevation", type=float, default=30.0,
+                      help="view height above the horizon [deg]")
+    prev.add_argument("--no-progress", action="store_true", help="no progress bar (movie)")
 
     sub.add_parser("bench", add_help=False,
-                   help="run the benchmarks (see BENCHMARKS.md; 'warpsim bench --help')")
+                   help="measure throughput (see BENCHMARKS.md; 'warpsim bench --help')")
+    sub.add_parser("accuracy", add_help=False,
+                   help="the accuracy study ('warpsim accuracy --help')")
     return parser
+
+
+@contextlib.contextmanager
+def _quiet_stderr(enabled: bool):
+    """Send file descriptor 2 to the null device: Warp's native code prints its start-up
+    warnings (no CUDA driver, say) with C ``fprintf``, which Python cannot intercept."""
+    if not enabled:
+        yield
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
+def init_warp(debug: bool) -> None:
+    """Initialise Warp, silently unless ``debug`` (then with its messages and build lines)."""
+    import warp as wp
+
+    import warpsim  # noqa: F401  (sets Warp's log level)
+
+    if debug:
+        wp.config.log_level = wp.LOG_INFO
+    with _quiet_stderr(not debug):
+        wp.init()
+
+
+def check_device(name: str | None, debug: bool) -> None:
+    """Refuse an unavailable Warp device in one line, before anything is built (Warp's native
+    code prints its own CUDA errors while it looks for the device: silenced unless ``debug``).
+
+    Raises:
+        ValueError: naming the device.
+    """
+    if name is None:
+        return
+    import warp as wp
+
+    try:
+        with _quiet_stderr(not debug):
+            wp.get_device(name)
+    except Exception as exc:  # Warp raises RuntimeError or ValueError, with several lines
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(f"device {name!r} is not available: {first}") from None
 
 
 def _cmd_scenes(_args) -> int:
@@ -78,99 +213,275 @@ def _cmd_scenes(_args) -> int:
     return 0
 
 
-def _energy_drift(sim, state) -> float:
-    """Largest per-sphere energy change, relative to that sphere's energy above the lowest
-    point of the scene (so a number near 0 means kept, 1 means all of it)."""
+def _energy_scale(sim) -> tuple[np.ndarray, np.ndarray]:
+    """Initial energies (N,) and each sphere's energy above the lowest point of the scene (N,),
+    the scale of relative energy figures (near 0: kept; 1: all of it) [J]."""
     scene = sim.scene
     g = scene.gravity
-    if len(scene.boxes):
+    if len(scene.boxes) and np.any(g):
         corners = scene.boxes.center + scene.boxes.bounding_radius()[:, None] * np.sign(g)
-        floor = corners[np.argmin(corners @ -g)] if np.any(g) else sim.energy_origin
+        floor = corners[np.argmin(corners @ -g)]
     else:
         floor = sim.energy_origin
-    mass = sim.mass
-    e0 = sim.initial_energy.astype(np.float64)
-    floor_potential = -mass * ((floor - sim.energy_origin) @ g)
-    scale = np.maximum(e0 - floor_potential, 1e-30)
-    return float(np.max(np.abs(sim.mechanical_energy(state) - e0) / scale)) if len(e0) else 0.0
+    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
+    floor_potential = -sim.mass * ((floor - sim.energy_origin) @ g)
+    return e0, np.maximum(e0 - floor_potential, ENERGY_SCALE_FLOOR)
+
+
+def energy_line(sim, state) -> str:
+    """The summary's energy line: the largest drift (elastic scenes), or what the contacts took
+    (``energy_retention < 1``: losing energy is the model, not an error)."""
+    e0, scale = _energy_scale(sim)
+    if not len(e0):
+        return "energy: no spheres"
+    energy = sim.mechanical_energy(state)
+    if sim.scene.energy_retention < 1.0:
+        lost = float(np.sum(e0 - energy) / np.sum(scale))
+        gained = float(np.max((energy - e0) / scale))
+        line = (f"energy lost at contacts: {100.0 * lost:.1f}% of the energy above the lowest "
+                f"obstacle (energy_retention = {sim.scene.energy_retention:g})")
+        return line + (f"; largest gain {gained:.2e} (relative)" if gained > 0.0 else "")
+    drift = float(np.max(np.abs(energy - e0) / scale))
+    return f"energy drift: {drift:.2e} (largest per sphere, relative)"
+
+
+def _accepts(function, name: str) -> bool:
+    try:
+        return name in inspect.signature(function).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def _run_options(args) -> dict:
+    """Keywords of ``Simulator.run`` asked for on the command line, checked to be supported by
+    this simulator before anything runs."""
+    import warpsim as ws
+
+    options = {}
+    if args.velocities:
+        if not _accepts(ws.Simulator.run, "velocities"):
+            raise ValueError("--velocities: this simulator does not record velocities yet")
+        options["velocities"] = True
+    if args.events is not None:
+        if not _accepts(ws.Simulator.run, "events"):
+            raise ValueError("--events: this simulator does not record contact events yet")
+        options["events"] = True
+    if args.events_capacity is not None:
+        from . import validation as check
+
+        if args.events is None:
+            raise ValueError("--events-capacity needs --events")
+        check.positive_int("events_capacity", args.events_capacity)
+        name = next((k for k in ("event_capacity", "events_capacity")
+                     if _accepts(ws.Simulator.run, k)), None)
+        if name is None:
+            raise ValueError("--events-capacity: this simulator has no event capacity option")
+        options[name] = args.events_capacity
+    return options
+
+
+def _simulator_options(args) -> dict:
+    """``motion`` and ``workers`` for :class:`warpsim.Simulator`, only when given (checked to
+    be supported before anything runs)."""
+    import warpsim as ws
+
+    options = {}
+    for name in ("motion", "workers"):
+        value = getattr(args, name)
+        if value is None:
+            continue
+        if not _accepts(ws.Simulator.__init__, name):
+            raise ValueError(f"--{name}: this simulator has no {name} option yet")
+        options[name] = value
+    return options
+
+
+def _frame_range(args, scene_frames: int) -> tuple[int, int]:
+    """``(start, end)``: frames written, the run stopping at ``end``."""
+    from . import validation as check
+
+    frames = check.positive_int("frames", scene_frames if args.frames is None else args.frames)
+    end = frames if args.end is None else check.positive_int("end", args.end)
+    if args.frames is not None and end > frames:
+        raise ValueError(f"--end {end} is past --frames {frames}")
+    start = check.positive_int("start", args.start, minimum=0)
+    if start >= end:
+        raise ValueError(f"--start {start} must be before --end {end}")
+    return start, end
 
 
 def _cmd_run(args) -> int:
     import warpsim as ws
 
     from . import validation as check
+    from .export.files import check_writable
 
     scene = ws.Scene.load(args.scene)
-    swarm = scene.spawn(n=args.spheres, seed=args.seed)
-    frames = check.positive_int("frames", scene.frames if args.frames is None else args.frames)
-    check.positive_int("every", args.every)
-    out = Path(args.output if args.output else f"{scene.name}.usdc")
-    if out.suffix not in (".usdc", ".usda"):
-        raise ValueError(f"output must end in .usdc or .usda, got {str(out)!r}")
-    if not out.parent.is_dir():
-        raise ValueError(f"output directory {str(out.parent)!r} does not exist")
+    if args.dask is not None or args.shards is not None or args.block is not None:
+        from . import distributed  # sharded: the spheres are drawn on the workers
+
+        print(distributed.run_command(args, scene))
+        return 0
+    swarm = scene.spawn(n=args.count, seed=args.seed)
+    start, end = _frame_range(args, scene.frames)
+    every = check.positive_int("every", args.every)
+    if args.output is not None and not args.output.strip():
+        raise ValueError("output path (-o) is empty")
+    out = check_writable(args.output if args.output is not None else f"{scene.name}.usdc",
+                         USD_SUFFIXES)
+    if args.events is not None:
+        from .events import require_parquet
+
+        check_writable(args.events, EVENTS_SUFFIXES, what="events file")
+        require_parquet()
+    if args.error_sample is not None:
+        check.positive_int("error_sample", args.error_sample)
+    options = _run_options(args)
+    check_device(args.device, args.debug_mode)
+    subset = None if args.spheres is None else sphere_selection(args.spheres, len(swarm))
+    extra = _simulator_options(args)
     sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
                        device=args.device, precision=args.precision,
-                       broad_phase=args.broad_phase)
+                       broad_phase=args.broad_phase, **extra)
     from . import export
 
-    estimate = export.estimate_usd_bytes(len(swarm), frames // args.every + 1, out.suffix[1:])
-    print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {frames} frames "
+    n_written = len(swarm) if subset is None else subset.size
+    n_records = len(sorted(set(range(start, end + 1, every)) | {end}))
+    spinning = bool(scene.friction > 0.0 or np.any(swarm.angular_momentum != 0.0))
+    estimate = export.estimate_usd_bytes(n_written, n_records, out.suffix, boxes=scene.boxes,
+                                         spinning=spinning, velocities=args.velocities)
+    if estimate > args.max_bytes:
+        raise ValueError(f"{str(out)!r} would be about {estimate / 1e6:,.0f} MB "
+                         f"({n_written} spheres x {n_records} frames), above --max-bytes "
+                         f"{args.max_bytes:,.0f}: record fewer frames (--every, --start/--end) "
+                         f"or spheres (--spheres), or raise --max-bytes")
+    print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "
           f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
           f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
     build = sim.build()  # reported apart from the run's speed
-    traj = sim.run(frames, every=args.every, progress=not args.no_progress)
+    if start:
+        sim.step(start)
+    traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
     state = sim.state()
     stats = sim.stats
-    path = export.write_usd(out, scene, traj, max_bytes=args.max_bytes)
+    path = export.write_usd(out, scene, traj, spheres=subset, velocities=args.velocities,
+                            warn=False)
     print(f"simulated {stats.frames} frames x {len(swarm)} spheres in {stats.seconds:.2f} s "
           f"(kernel build {build:.2f} s): "
           f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
     print(f"bounces: {stats.bounces:,} ({stats.bounces / max(stats.sphere_frames, 1):.3f} per "
           f"sphere-frame); capped: {stats.capped:,} sphere-frames, {stats.capped_spheres} spheres")
-    print(f"energy drift: {_energy_drift(sim, state):.2e} (largest per sphere, relative)")
-    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {len(traj)} frames)")
+    print(energy_line(sim, state))
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {len(traj)} frames "
+          f"{int(traj.frame[0])}..{int(traj.frame[-1])}, {n_written} spheres)")
+    if args.events is not None:
+        events = traj.events
+        events_path = events.write_parquet(args.events)
+        lost = (f"; {events.dropped:,} dropped: the buffer was full, raise --events-capacity"
+                if events.dropped else "")
+        print(f"wrote {events_path} ({len(events):,} contacts{lost})")
+    if args.error_sample is not None:
+        from . import reference
+
+        report = reference.compare(sim, scene, swarm, sample=args.error_sample)
+        print(report.summary())
     return 0
 
 
 def _cmd_preview(args) -> int:
     from . import export
 
-    traj = export.read_usd(args.usd)
-    frame = int(traj.frame[-1]) if args.frame is None else args.frame
-    path = export.render_preview(args.usd, frame, args.output, size=args.size)
+    if (args.output is None) == (args.movie is None):
+        raise ValueError("preview needs -o IMAGE or --movie MOVIE (one of them)")
+    angles = {"azimuth": args.azimuth, "elevation": args.elevation}
+    if args.movie is not None:
+        from .export.files import check_writable
+        from .export.movie import check_movie_support, render_movie
+
+        check_movie_support(args.movie)
+        check_writable(args.movie, what="movie")
+        path = render_movie(args.usd, args.movie, every=args.every, size=args.size,
+                            progress=not args.no_progress, **angles)
+        print(f"wrote {path} ({args.size[0]}x{args.size[1]}, one recorded frame in "
+              f"{args.every})")
+        return 0
+    from .export.files import check_writable
+    from .export.preview import image_format
+
+    image_format(args.output)
+    check_writable(args.output, what="image")
+    frame = export.read_usd_frame(args.usd, args.frame).frame[0]
+    path = export.render_preview(args.usd, int(frame), args.output, size=args.size, **angles)
     print(f"wrote {path} (frame {frame}, {args.size[0]}x{args.size[1]})")
     return 0
 
 
+def _cmd_bench(argv: list[str]) -> int:
+    from . import bench as benchmark
+
+    if _accepts(benchmark.main, "prog"):
+        return benchmark.main(argv, prog="warpsim bench") or 0
+    saved = sys.argv[0]
+    sys.argv[0] = "warpsim bench"  # argparse's default prog
+    try:
+        return benchmark.main(argv) or 0
+    finally:
+        sys.argv[0] = saved
+
+
+def _cmd_accuracy(argv: list[str]) -> int:
+    try:
+        from . import accuracy
+    except ImportError as exc:
+        if getattr(exc, "name", "") != f"{__package__}.accuracy":
+            raise
+        raise ValueError("the accuracy study is not part of this installation") from None
+    return accuracy.main(argv) or 0
+
+
 COMMANDS = {"run": _cmd_run, "scenes": _cmd_scenes, "preview": _cmd_preview}
+FORWARDED = {"bench": _cmd_bench, "accuracy": _cmd_accuracy}  # parse their own options
+
+
+def _report(exc: BaseException, debug: bool) -> int:
+    if debug:
+        raise exc
+    if isinstance(exc, (ValueError, OSError, ImportError)):
+        sys.stderr.write(f"warpsim: error: {exc}\n")
+    else:  # an unexpected failure: still one line unless asked
+        sys.stderr.write(f"warpsim: error: {type(exc).__name__}: {exc} "
+                         "(run with --debug for the traceback)\n")
+    return EXIT_ERROR
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``warpsim`` console script; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ["bench"]:  # the benchmark parses its own options
-        from .benchmark import main as bench_main
-
-        return bench_main(argv[1:]) or 0
+    debug = os.environ.get("WARPSIM_DEBUG") == "1"
+    head = 0
+    while head < len(argv) and argv[head] == "--debug":  # global flag before a forwarded one
+        debug, head = True, head + 1
+    if argv[head:head + 1] and argv[head] in FORWARDED:
+        command, rest = argv[head], argv[head + 1:]
+        try:
+            init_warp(debug)
+            return FORWARDED[command](rest)
+        except KeyboardInterrupt:
+            sys.stderr.write("warpsim: interrupted\n")
+            return EXIT_INTERRUPTED
+        except Exception as exc:
+            return _report(exc, debug)
     args = build_parser().parse_args(argv)
-    debug = args.debug or os.environ.get("WARPSIM_DEBUG") == "1"
+    debug = debug or args.debug
+    args.debug_mode = debug
     try:
+        init_warp(debug)
         return COMMANDS[args.command](args)
     except KeyboardInterrupt:
         sys.stderr.write("warpsim: interrupted\n")
-        return 130
-    except (ValueError, OSError) as exc:
-        if debug:
-            raise
-        sys.stderr.write(f"warpsim: error: {exc}\n")
-        return EXIT_ERROR
-    except Exception as exc:  # an unexpected failure: still one line unless asked
-        if debug:
-            raise
-        sys.stderr.write(f"warpsim: error: {type(exc).__name__}: {exc} "
-                         "(run with --debug for the traceback)\n")
-        return EXIT_ERROR
+        return EXIT_INTERRUPTED
+    except Exception as exc:
+        return _report(exc, debug)
 
 
 if __name__ == "__main__":
