@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import warpsim as ws
-from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
+from warpsim.kernels.collide_kernels import bounce_kernel, collide_arc_kernel, collide_kernel
 from warpsim.kernels.frame_kernel import frame_kernel
 from warpsim.kernels.nearest import BROAD_PHASES
 from warpsim.kernels.variant import KERNEL_OPTIONS
@@ -32,10 +32,13 @@ def all_kernels():
     out = []
     for prec, bvh in itertools.product(PRECISIONS, BROAD_PHASES):
         out.append((f"collide/{prec}/{bvh}", collide_kernel(prec, bvh)))
+        out.append((f"collide-arc/{prec}/{bvh}", collide_arc_kernel(prec, bvh)))
     for prec, cap, spin, lossy, bvh in itertools.product(PRECISIONS, (1, 8), FLAGS, FLAGS,
                                                          BROAD_PHASES):
         out.append((f"bounce/{prec}/{cap}/{spin}/{lossy}/{bvh}",
                     bounce_kernel(prec, cap, spin, lossy, bvh)))
+        out.append((f"bounce-arc/{prec}/{cap}/{spin}/{lossy}/{bvh}",
+                    bounce_kernel(prec, cap, spin, lossy, bvh, motion="ballistic")))
     for prec, cap, spin, corr, lossy, bvh in itertools.product(PRECISIONS, (1, 8), FLAGS, FLAGS,
                                                                FLAGS, BROAD_PHASES):
         out.append((f"frame/{prec}/{cap}/{spin}/{corr}/{lossy}/{bvh}",
@@ -43,6 +46,10 @@ def all_kernels():
         if cap == 8:
             out.append((f"frame/{prec}/{cap}/{spin}/{corr}/{lossy}/{bvh}/events",
                         frame_kernel(prec, cap, spin, corr, lossy, bvh, events=True)))
+            for events in FLAGS:
+                out.append((f"frame-arc/{prec}/{cap}/{spin}/{corr}/{lossy}/{bvh}/{events}",
+                            frame_kernel(prec, cap, spin, corr, lossy, bvh, events=events,
+                                         motion="ballistic")))
     return out
 
 

@@ -11,7 +11,7 @@ from . import broad_phase as broad
 from . import validation as check
 from .device import resolve_device
 from .kernels import precision as fp
-from .kernels.collide_kernels import bounce_kernel, collide_kernel
+from .kernels.collide_kernels import bounce_kernel, collide_arc_kernel, collide_kernel
 from .model import Spheres, event_buffer, launch, put_model, to_device
 from .obstacles import RoundedBox, RoundedBoxes
 from .swarm import Swarm
@@ -47,10 +47,13 @@ class Contacts:
 
 
 def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: float, *,
-                  device=None, precision: str = "float32", broad_phase: str = "auto") -> Contacts:
+                  device=None, precision: str = "float32", broad_phase: str = "auto",
+                  motion: str = "linear", gravity=None) -> Contacts:
     """First contact of each moving sphere with a group of static rounded boxes.
 
-    Every sphere moves in a straight line for ``dt``; the first contact over all boxes is kept
+    With ``motion="linear"`` every sphere moves in a straight line for ``dt`` (the sheet's
+    segment ``A -> A + v dt``); with ``motion="ballistic"`` it follows the exact parabola
+    ``A + v s + 1/2 g s^2``, ``s`` in ``[0, dt]``. The first contact over all boxes is kept
     (ties: the lower box index). A contact counts only when the sphere moves into the surface;
     a sphere starting in contact and moving in is hit at ``t = 0``. Inputs are never modified.
 
@@ -65,6 +68,12 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
         broad_phase: how each sphere finds its candidate boxes (see
             :mod:`warpsim.broad_phase`): ``"brute"``, ``"bvh"``, ``"grid"`` or ``"auto"``
             (built per call). The results are bit-identical; only the speed differs.
+        motion: ``"linear"`` or ``"ballistic"``. For the ballistic motion ``t`` is the contact
+            time as a fraction of ``dt``, ``position`` the centre on the parabola then,
+            ``new_velocity`` the reflected velocity at the contact (``v + g dt`` without one)
+            and ``new_position`` the frame's end along the new parabola.
+        gravity: [m/s^2], world frame, for the ballistic motion (None: zero); the linear
+            segment has no gravity, so a non-zero one is refused there.
 
     Returns:
         :class:`Contacts`, arrays of the chosen precision.
@@ -75,11 +84,12 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
     boxes, pos, vel, rad = check.sphere_batch(position, velocity, radius, boxes)
     n = pos.shape[0]
     dt = check.scene_settings({"dt": dt})["dt"]
+    motion, g = _motion_and_gravity(motion, gravity)
     p = precision_of(precision)
     dev = resolve_device(device)
-    method, grid = broad.choose(broad_phase, boxes, broad.reach(pos, vel, rad, (0, 0, 0), dt),
+    method, grid = broad.choose(broad_phase, boxes, broad.reach(pos, vel, rad, g, dt),
                                 p.np_dtype)
-    model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt)
+    model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt, gravity=g)
     spheres = Spheres(radius=to_device(rad, p.scalar, p, dev), mass=None)
     state = {"position": to_device(pos, p.vec3, p, dev),
              "velocity": to_device(vel, p.vec3, p, dev)}
@@ -87,8 +97,9 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
            "t_out": wp.empty(n, dtype=p.scalar, device=dev)}
     for name in ("contact_out", "normal_out", "new_position_out", "new_velocity_out"):
         out[name] = wp.empty(n, dtype=p.vec3, device=dev)
-    launch(collide_kernel(p.name, method), n, dev, model=model, spheres=spheres,
-           state_in=state, outputs=out)
+    kernel = (collide_kernel(p.name, method) if motion == "linear"
+              else collide_arc_kernel(p.name, method))
+    launch(kernel, n, dev, model=model, spheres=spheres, state_in=state, outputs=out)
     box = out["box_out"].numpy()
     return Contacts(hit=box >= 0, t=out["t_out"].numpy(), position=out["contact_out"].numpy(),
                     normal=out["normal_out"].numpy(),
@@ -97,7 +108,7 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
 
 
 def collide_box(position, velocity, radius, box: RoundedBox, dt: float, *, device=None,
-                precision: str = "float32") -> Contacts:
+                precision: str = "float32", motion: str = "linear", gravity=None) -> Contacts:
     """First contact of each moving sphere with one static rounded box (sheet method 1).
 
     The same contract as :func:`collide_boxes` with a group of one (``box`` is 0 or -1); one
@@ -106,7 +117,19 @@ def collide_box(position, velocity, radius, box: RoundedBox, dt: float, *, devic
     if not isinstance(box, RoundedBox):
         raise ValueError(f"box must be a warpsim.RoundedBox, got {type(box).__name__}")
     return collide_boxes(position, velocity, radius, box.as_boxes(), dt, device=device,
-                         precision=precision, broad_phase="brute")
+                         precision=precision, broad_phase="brute", motion=motion,
+                         gravity=gravity)
+
+
+def _motion_and_gravity(motion, gravity) -> tuple[str, np.ndarray]:
+    """The checked motion model and gravity [m/s^2] of a batched query."""
+    motion = check.motion(motion)
+    g = np.zeros(3) if gravity is None else check.vec3("gravity", gravity)
+    if motion == "linear" and np.any(g != 0.0):
+        raise ValueError("gravity applies to motion='ballistic': the linear sweep is the "
+                         "straight segment v dt (use motion='ballistic', or a Simulator for "
+                         "whole frames with gravity)")
+    return motion, g
 
 
 def precision_of(name: str) -> fp.Precision:
@@ -138,16 +161,20 @@ class Bounces:
 def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: float, *,
            max_bounces: int = 8, mass=1.0, angular_momentum=None, friction: float = 0.0,
            max_angular_speed: float = 50.0, energy_retention: float = 1.0, device=None,
-           precision: str = "float32", broad_phase: str = "auto") -> Bounces:
-    """Move each sphere in a straight line for ``dt``, bouncing off the boxes (sheet method 3).
+           precision: str = "float32", broad_phase: str = "auto", motion: str = "linear",
+           gravity=None) -> Bounces:
+    """Move each sphere for ``dt``, bouncing off the boxes (sheet method 3).
 
     At each contact the velocity is reflected and the sphere goes on with the rest of its path,
     until nothing is hit or ``max_bounces`` contacts were taken; the broken line is exactly
     ``|v| dt`` long when ``energy_retention = 1``. When the cap is reached with path left, the
     sphere stays at its last contact with its reflected velocity. Each contact applies the
     friction torque to the angular momentum (``friction > 0``) and keeps ``energy_retention``
-    of the kinetic energy (the speed and the rest of the path shrink by its square root). No
-    gravity here: see :class:`warpsim.Simulator` for whole frames. Inputs are never modified.
+    of the kinetic energy (the speed and the rest of the path shrink by its square root). The
+    linear motion (the sheet's) moves in a straight line and has no gravity; the ballistic one
+    follows the parabolas of ``gravity`` for the frame's time (``velocity`` out is then the true
+    velocity at the frame's end). See :class:`warpsim.Simulator` for whole frames. Inputs are
+    never modified.
 
     Args:
         position: centres [m], (N, 3). velocity: [m/s], (N, 3). radius: [m], scalar or (N,).
@@ -161,10 +188,12 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
         device: Warp device. precision: ``"float32"`` or ``"float64"``.
         broad_phase: ``"auto"``, ``"bvh"``, ``"grid"`` or ``"brute"``, as in :func:`collide_boxes`
             (bit-identical results).
+        motion, gravity: as in :func:`collide_boxes`.
 
     Raises:
         ValueError: a bad input, naming the field and the index.
     """
+    motion, g = _motion_and_gravity(motion, gravity)
     boxes, pos, vel, rad = check.sphere_batch(position, velocity, radius, boxes)
     # the same checks as a Swarm's and a Scene's, so the messages are the same too
     swarm = Swarm(pos, vel, radius=rad, mass=mass, angular_momentum=angular_momentum)
@@ -177,11 +206,12 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
     retention = settings["energy_retention"]
     p = precision_of(precision)
     dev = resolve_device(device)
-    method, grid = broad.choose(broad_phase, boxes, broad.reach(pos, vel, rad, (0, 0, 0), dt),
+    method, grid = broad.choose(broad_phase, boxes, broad.reach(pos, vel, rad, g, dt),
                                 p.np_dtype)
-
-    kernel = bounce_kernel(p.name, max_bounces, friction > 0.0, retention < 1.0, method)
-    model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt, friction=friction,
+    kernel = bounce_kernel(p.name, max_bounces, friction > 0.0, retention < 1.0, method,
+                           **({} if motion == "linear" else {"motion": motion}))
+    model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt, gravity=g,
+                      friction=friction,
                       max_angular_speed=max_rot, energy_retention=retention)
     spheres = Spheres(radius=to_device(rad, p.scalar, p, dev),
                       mass=to_device(mas, p.scalar, p, dev))
