@@ -45,4 +45,8 @@ def __getattr__(name):
         import importlib
 
         return importlib.import_module(".export", __name__)
+    if name in ("reference", "error_report", "accuracy", "distributed"):  # lazy: optional parts
+        import importlib
+
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'warpsim' has no attribute {name!r}")
