@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import platform
 import sys
 import time
@@ -38,29 +37,12 @@ HORIZON = 0.5
 
 
 def tilted_plates() -> ws.Scene:
-    """A floor and six rounded plates tilted 8 to 30 degrees about horizontal axes."""
-    rng = np.random.default_rng(4)
-    centers, halves, rotations, radii = [[0.0, -0.5, 0.0]], [[3.0, 0.5, 3.0]], [[0, 0, 0, 1]], [0]
-    for k in range(6):
-        axis = rng.normal(size=3)
-        axis[1] = 0.0
-        axis /= np.linalg.norm(axis)
-        angle = math.radians(rng.uniform(8, 30))
-        centers.append([-1.5 + 0.6 * k, 0.3 + 0.05 * k, rng.uniform(-0.4, 0.4)])
-        halves.append([0.25, 0.0, 0.6])
-        rotations.append(list(np.append(axis * math.sin(angle / 2), math.cos(angle / 2))))
-        radii.append(0.05)
-    return ws.Scene(ws.RoundedBoxes(center=centers, half_extents=halves, rotation=rotations,
-                                    radius=radii))
+    """The bundled ``plates`` scene (a floor, six rounded plates tilted 8 to 30 degrees)."""
+    return ws.Scene.load("plates")
 
 
 def drop_swarm(n: int, seed: int = 1) -> ws.Swarm:
-    rng = np.random.default_rng(seed)
-    position = np.stack([rng.uniform(-1.7, 1.7, n), rng.uniform(0.8, 1.2, n),
-                         rng.uniform(-0.4, 0.4, n)], axis=1)
-    velocity = np.stack([rng.uniform(-0.5, 0.5, n), rng.uniform(-1, 1, n),
-                         rng.uniform(-0.3, 0.3, n)], axis=1)
-    return ws.Swarm(position, velocity, radius=0.04)
+    return tilted_plates().spawn(n=n, seed=seed)
 
 
 def accuracy_rows(n: int) -> list[dict]:

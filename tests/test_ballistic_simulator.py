@@ -22,32 +22,12 @@ FLOAT32_POSITION_TOL = 2e-4
 
 
 def tilted_plates() -> ws.Scene:
-    rng = np.random.default_rng(4)
-    centers = [[0.0, -0.5, 0.0]]
-    halves = [[3.0, 0.5, 3.0]]
-    rotations = [[0.0, 0.0, 0.0, 1.0]]
-    radii = [0.0]
-    for k in range(6):
-        axis = rng.normal(size=3)
-        axis[1] = 0.0
-        axis /= np.linalg.norm(axis)
-        angle = math.radians(rng.uniform(8, 30))
-        centers.append([-1.5 + 0.6 * k, 0.3 + 0.05 * k, rng.uniform(-0.4, 0.4)])
-        halves.append([0.25, 0.0, 0.6])
-        rotations.append(list(np.append(axis * math.sin(angle / 2), math.cos(angle / 2))))
-        radii.append(0.05)
-    boxes = ws.RoundedBoxes(center=centers, half_extents=halves, rotation=rotations,
-                            radius=radii)
-    return ws.Scene(boxes, motion="ballistic")
+    """The bundled ``plates`` scene: a floor and six rounded plates tilted 8 to 30 degrees."""
+    return ws.Scene.load("plates")
 
 
 def drop_swarm(n=48, seed=1) -> ws.Swarm:
-    rng = np.random.default_rng(seed)
-    position = np.stack([rng.uniform(-1.7, 1.7, n), rng.uniform(0.8, 1.2, n),
-                         rng.uniform(-0.4, 0.4, n)], axis=1)
-    velocity = np.stack([rng.uniform(-0.5, 0.5, n), rng.uniform(-1, 1, n),
-                         rng.uniform(-0.3, 0.3, n)], axis=1)
-    return ws.Swarm(position, velocity, radius=0.04)
+    return tilted_plates().spawn(n=n, seed=seed)
 
 
 @pytest.fixture(scope="module")
@@ -57,10 +37,10 @@ def exact():
 
 
 @pytest.mark.parametrize("dt", [1 / 30, 1 / 240])
-def test_positions_agree_with_the_exact_motion_at_any_step(exact, precision, dt):
+def test_positions_agree_with_the_exact_motion_at_any_step(device, exact, precision, dt):
     scene, swarm = tilted_plates(), drop_swarm()
     frames = round(0.5 / dt)
-    sim = ws.Simulator(scene, swarm, dt=dt, precision=precision, device="cpu", max_bounces=16)
+    sim = ws.Simulator(scene, swarm, dt=dt, precision=precision, device=device, max_bounces=16)
     traj = sim.run(frames, every=frames, events=True)
     ok = ~exact.incomplete
     assert ok.sum() >= 40
@@ -72,10 +52,10 @@ def test_positions_agree_with_the_exact_motion_at_any_step(exact, precision, dt)
     assert touched.sum() >= 24
 
 
-def test_first_contact_times_agree_to_float_precision(exact, precision):
+def test_first_contact_times_agree_to_float_precision(device, exact, precision):
     scene, swarm = tilted_plates(), drop_swarm()
     dt = 1 / 60
-    sim = ws.Simulator(scene, swarm, dt=dt, precision=precision, device="cpu", max_bounces=16)
+    sim = ws.Simulator(scene, swarm, dt=dt, precision=precision, device=device, max_bounces=16)
     ev = sim.run(30, every=30, events=True).events
     tol = 1e-9 if precision == "float64" else 2e-4
     checked = 0
@@ -91,11 +71,11 @@ def test_first_contact_times_agree_to_float_precision(exact, precision):
     assert checked >= 24
 
 
-def test_final_positions_do_not_depend_on_the_step(precision):
+def test_final_positions_do_not_depend_on_the_step(device, precision):
     scene, swarm = tilted_plates(), drop_swarm(n=32, seed=7)
     finals = []
     for dt in (1 / 20, 1 / 40, 1 / 80, 1 / 160):
-        sim = ws.Simulator(scene, swarm, dt=dt, precision=precision, device="cpu",
+        sim = ws.Simulator(scene, swarm, dt=dt, precision=precision, device=device,
                            max_bounces=16)
         sim.step(round(0.4 / dt))
         finals.append(sim.state().position.astype(np.float64))
@@ -104,14 +84,14 @@ def test_final_positions_do_not_depend_on_the_step(precision):
 
 
 @pytest.mark.parametrize("dt", [1 / 60, 1 / 10])
-def test_free_fall_is_the_parabola_and_the_floor_bounce_is_exact(precision, dt):
+def test_free_fall_is_the_parabola_and_the_floor_bounce_is_exact(device, precision, dt):
     """A ball dropped from h onto a floor: the bounce times are t_k = t0 (1 + 2k), and the
     recorded velocity is the true velocity at each frame."""
     h, r = 1.0, 0.1
     floor = ws.RoundedBoxes(center=[[0, -0.5, 0]], half_extents=[[5, 0.5, 5]])
     sim = ws.Simulator(ws.Scene(floor, motion="ballistic"),
                        ws.Swarm([[0, h + r, 0]], [[0.25, 0, 0]], radius=r), dt=dt,
-                       precision=precision, device="cpu")
+                       precision=precision, device=device)
     frames = round(2.0 / dt)
     traj = sim.run(frames, every=1, velocities=True, events=True)
     t0 = math.sqrt(2 * h / G)
@@ -130,10 +110,10 @@ def test_free_fall_is_the_parabola_and_the_floor_bounce_is_exact(precision, dt):
     np.testing.assert_allclose(traj.velocity[:, 0, 1], vy, atol=tol * 100)
 
 
-def test_energy_is_kept_without_any_correction(precision):
+def test_energy_is_kept_without_any_correction(device, precision):
     scene = ws.Scene.load("room")
     sim = ws.Simulator(scene, scene.spawn(n=300, seed=2), motion="ballistic",
-                       precision=precision, device="cpu")
+                       precision=precision, device=device)
     assert sim.energy_correction is False
     sim.step(600)
     e0 = sim.initial_energy

@@ -14,11 +14,11 @@ G = 9.81
 DT = 1.0 / 60.0
 
 
-def test_drop_on_a_floor_matches_the_scheme(precision):
+def test_drop_on_a_floor_matches_the_scheme(device, precision):
     r, h0 = 0.1, 1.0  # centre starts h0 above the contact height
     floor = ws.RoundedBoxes(center=[[0, -0.5, 0]], half_extents=[[10, 0.5, 10]])
     sim = ws.Simulator(ws.Scene(floor), ws.Swarm([[0.0, r + h0, 0.0]], [[0, 0, 0]], radius=r),
-                       dt=DT, precision=precision, device="cpu")
+                       dt=DT, precision=precision, device=device)
     traj = sim.run(40, every=40, events=True)
     ev = traj.events
     # semi-implicit Euler: v_k = -g dt k, y_k = y_{k-1} + v_k dt
@@ -44,7 +44,7 @@ def test_drop_on_a_floor_matches_the_scheme(precision):
     assert ev.dropped == 0
 
 
-def test_into_a_corner_hits_both_walls_in_order(precision):
+def test_into_a_corner_hits_both_walls_in_order(device, precision):
     """Zero gravity, straight at a vertical corner: wall x first, then wall z, same frame."""
     walls = ws.RoundedBoxes(center=[[1.5, 0, 0], [0, 0, 1.5]],
                             half_extents=[[0.5, 2, 2], [2, 2, 0.5]])
@@ -52,7 +52,7 @@ def test_into_a_corner_hits_both_walls_in_order(precision):
     start = np.array([0.0, 0.0, 0.0])
     v = np.array([30.0, 0.0, 15.0])  # reaches x = 0.75 at t = 0.025 s, z = 0.75 at 0.05 s
     sim = ws.Simulator(ws.Scene(walls, gravity=(0, 0, 0)), ws.Swarm([start], [v], radius=r),
-                       dt=0.1, precision=precision, device="cpu")
+                       dt=0.1, precision=precision, device=device)
     ev = sim.run(1, events=True).events
     assert len(ev) == 2 == sim.stats.bounces
     assert ev.box.tolist() == [0, 1]

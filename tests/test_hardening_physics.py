@@ -79,7 +79,7 @@ def test_the_reported_case_stays_in_front():
 
 @pytest.mark.parametrize("radius", [0.0, 1e-9])
 @pytest.mark.parametrize("speed", [5.0, 1e3, 1e6])
-def test_closed_room_of_plates_holds_every_point(precision, radius, speed):
+def test_closed_room_of_plates_holds_every_point(device, precision, radius, speed):
     """Six zero-thickness plates around a cube, and two zero-thickness dividers across it: no
     point leaves its cell, whatever its speed (no gravity)."""
     h = 2.0
@@ -95,7 +95,7 @@ def test_closed_room_of_plates_holds_every_point(precision, radius, speed):
     direction = rng.normal(size=(n, 3))
     direction /= np.linalg.norm(direction, axis=1)[:, None]
     swarm = ws.Swarm(position, speed * direction, radius=radius)
-    sim = ws.Simulator(scene, swarm, precision=precision, max_bounces=64, device="cpu")
+    sim = ws.Simulator(scene, swarm, precision=precision, max_bounces=64, device=device)
     frames = 20 if speed >= 1e6 else 60
     for _ in range(frames // 10):
         sim.step(10)
@@ -105,11 +105,11 @@ def test_closed_room_of_plates_holds_every_point(precision, radius, speed):
         assert (np.sign(p[:, :2]) == np.sign(position[:, :2])).all(), "a point changed cell"
 
 
-def test_thin_walls_with_points_keep_their_cells(precision):
+def test_thin_walls_with_points_keep_their_cells(device, precision):
     scene = ws.Scene.load("thin-walls")
     base = scene.spawn(n=400, seed=2)
     swarm = ws.Swarm(base.position, base.velocity, radius=0.0, mass=base.mass)
-    sim = ws.Simulator(scene, swarm, precision=precision, device="cpu")
+    sim = ws.Simulator(scene, swarm, precision=precision, device=device)
     start = np.sign(swarm.position[:, :2])
     for _ in range(6):
         sim.step(10)
@@ -121,7 +121,7 @@ def test_thin_walls_with_points_keep_their_cells(precision):
 
 @pytest.mark.parametrize("correction", [True, False])
 @pytest.mark.parametrize("height,vx", [(0.5, 1.0), (0.01, 0.5)])
-def test_floor_keeps_horizontal_speed_and_bounce_height(precision, correction, height, vx):
+def test_floor_keeps_horizontal_speed_and_bounce_height(device, precision, correction, height, vx):
     """A ball bouncing on a flat frictionless floor (rotated about the vertical, anywhere in the
     world) keeps its horizontal velocity to float precision, and its apex does not drift above
     its start by more than the model's per-bounce error (one frame of gravity)."""
@@ -138,7 +138,7 @@ def test_floor_keeps_horizontal_speed_and_bounce_height(precision, correction, h
         start = np.add(where, [0.0, r + height, 0.0])
         v0 = np.array([vx * math.cos(angle), 0.0, vx * math.sin(angle)])
         sim = ws.Simulator(scene, ws.Swarm([start], [v0], radius=r), dt=dt, precision=precision,
-                           device="cpu")
+                           device=device)
         apex = -np.inf
         frames = 1800  # 30 s
         for k in range(frames // 60):
@@ -177,23 +177,23 @@ def floor_scene(**kw) -> ws.Scene:
 
 
 @pytest.mark.parametrize("dt", [1 / 240, 1 / 60, 1 / 10])
-def test_no_energy_gain_released_near_a_floor(precision, dt):
+def test_no_energy_gain_released_near_a_floor(device, precision, dt):
     """Spheres released at rest from 1 um to 0.3 mm above a floor (and from 1 cm)."""
     gaps = np.array([1e-6, 3e-6, 1e-5, 3e-5, 1e-4, 3e-4, 1e-2])
     r = 0.05
     position = np.stack([np.linspace(-5, 5, len(gaps)), r + gaps, np.zeros(len(gaps))], axis=1)
     sim = ws.Simulator(floor_scene(), ws.Swarm(position, np.zeros_like(position), radius=r),
-                       dt=dt, precision=precision, device="cpu")
+                       dt=dt, precision=precision, device=device)
     assert_no_gain(sim, 300)
     assert (sim.state().position[:, 1] <= r + gaps + 9.81 * dt * dt).all()
 
 
 @pytest.mark.parametrize("dt", [1 / 60, 0.1, 1.0])
-def test_no_energy_gain_at_large_steps(precision, dt):
+def test_no_energy_gain_at_large_steps(device, precision, dt):
     """A ball dropped from 1 m never climbs above its energy height, at any step."""
     r = 0.1
     sim = ws.Simulator(floor_scene(), ws.Swarm([[0, 1.0 + r, 0]], [[0.3, 0, 0]], radius=r),
-                       dt=dt, precision=precision, device="cpu")
+                       dt=dt, precision=precision, device=device)
     top = -np.inf
     slack = energy_slack(sim)
     for _ in range(100):
@@ -205,7 +205,7 @@ def test_no_energy_gain_at_large_steps(precision, dt):
     assert top <= 1.0 + 9.81 * dt * dt / 8 + 1e-4, (top, energy_height)
 
 
-def test_no_energy_gain_sliding_down_a_slope(precision):
+def test_no_energy_gain_sliding_down_a_slope(device, precision):
     """Frictionless spheres sliding 10 s down a long 20-degree slope."""
     angle = math.radians(20.0)
     q = [0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2)]  # tilt about z
@@ -216,7 +216,7 @@ def test_no_energy_gain_sliding_down_a_slope(precision):
     s = np.array([60.0, 100.0, 140.0])
     position = s[:, None] * tangent + (0.5 + r) * normal
     sim = ws.Simulator(ws.Scene(slope), ws.Swarm(position, np.zeros((3, 3)), radius=r),
-                       precision=precision, device="cpu")
+                       precision=precision, device=device)
     assert_no_gain(sim, 600, chunk=60)
     # and they did slide down: at least half the frictionless distance 1/2 g sin(a) t^2
     moved = (position - sim.state().position) @ tangent
@@ -224,7 +224,7 @@ def test_no_energy_gain_sliding_down_a_slope(precision):
 
 
 @pytest.mark.parametrize("seed", range(3))
-def test_no_energy_gain_bouncing_in_the_room(precision, seed):
+def test_no_energy_gain_bouncing_in_the_room(device, precision, seed):
     scene = ws.Scene.load("room")
-    sim = ws.Simulator(scene, scene.spawn(n=200, seed=seed), precision=precision, device="cpu")
+    sim = ws.Simulator(scene, scene.spawn(n=200, seed=seed), precision=precision, device=device)
     assert_no_gain(sim, 240, chunk=40)
