@@ -42,13 +42,12 @@ RESTING_SPEED = 5.0e-3
 COPLANAR_REL = 1.0e-6
 
 
-def ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
-                    broad_phase, events: bool = False) -> SimpleNamespace:
+def ballistic_funcs(p: Precision, spin: bool, lossy: bool, broad_phase,
+                    events: bool = False) -> SimpleNamespace:
     """Build the ballistic bounce loop for one precision and one feature set.
 
     Args:
         p: precision.
-        max_bounces: cap on contacts per frame (compiled in).
         spin: update the angular momentum from contact friction (else ``L`` passes through).
         lossy: apply ``energy_retention`` at each bounce (else no loss code is compiled).
         broad_phase: one of ``nearest.BROAD_PHASES`` (``True``/``False`` mean ``"bvh"`` and
@@ -61,17 +60,17 @@ def ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
     """
     uses_bvh(broad_phase)  # checks the name
     name = {True: "bvh", False: "brute"}.get(broad_phase, broad_phase)
-    return _ballistic_funcs(p, int(max_bounces), bool(spin), bool(lossy), name, bool(events))
+    return _ballistic_funcs(p, bool(spin), bool(lossy), name, bool(events))
 
 
 @cache
-def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
-                     broad_phase: str, events: bool) -> SimpleNamespace:
+def _ballistic_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
+                     events: bool) -> SimpleNamespace:
     scalar, vec3 = p.scalar, p.vec3
     nearest_hit_arc = model_nearest_hit_arc(p, broad_phase)
     arc_contact_centre = nearest_arc_funcs(p).arc_contact_centre
     arc_point = arc_funcs(p).arc_point
-    write_event = bounce_funcs(p, max_bounces, spin, lossy, "brute", events).write_event
+    write_event = bounce_funcs(p, spin, lossy, "brute", events).write_event
     dyn = dynamics_funcs(p)
     friction_spin = dyn.friction_spin
     potential = dyn.potential
@@ -82,8 +81,7 @@ def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
     RESTING = scalar(RESTING_SPEED)
     COPLANAR = scalar(1.0 - COPLANAR_REL)
     TANGENT_REL = scalar(p.tangent_rel)
-    MAX_BOUNCES = int(max_bounces)
-    HOP_FRACTION = scalar(1.0 / (2.0 * max(max_bounces, 1)))
+    HALF_HOP = scalar(0.5)  # the hop of a bounce lasts 2 |u.n| / |g.n|: half of it per cap
 
     @wp.func
     def along_plane(x: vec3, n: vec3):
@@ -93,7 +91,7 @@ def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
     @wp.func
     def ballistic_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
                        g: vec3, origin: vec3, dt: scalar, friction: scalar, max_rot: scalar,
-                       retention: scalar,
+                       retention: scalar, max_bounces: int,
                        box_center: wp.array(dtype=p.vec3), box_rotation: wp.array(dtype=p.mat33),
                        box_half_extents: wp.array(dtype=p.vec3),
                        box_radius: wp.array(dtype=p.scalar), box_extent: wp.array(dtype=p.vec3),
@@ -105,14 +103,15 @@ def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                        event_index_out: wp.array2d(dtype=wp.int32),
                        event_vector_out: wp.array2d(dtype=vec3),
                        event_scalar_out: wp.array2d(dtype=scalar)):
-        """Move a sphere for one frame along its parabolas, bouncing up to ``MAX_BOUNCES`` times.
+        """Move a sphere for one frame along its parabolas, bouncing up to ``max_bounces`` times.
 
         Args:
             a: centre at the frame's start [m]. v: true velocity at the frame's start [m/s].
             r: radius [m]. m: mass [kg]. L: angular momentum [kg m^2/s]. energy: total energy
             [J]. g: gravity [m/s^2]. origin: potential reference point [m]. dt: frame duration
             [s]. friction: ``k_f`` [kg/s]. max_rot: ``|Rot|`` clamp [rad/s]. retention: kept
-            fraction of kinetic energy per bounce. box_*: the obstacles (see ``nearest``);
+            fraction of kinetic energy per bounce. max_bounces: cap on contacts this frame (a
+            launch value). box_*: the obstacles (see ``nearest``);
             ``box_bvh`` and ``grid_*``: the broad phase's data. frame, sphere,
             event_*: the event buffer and what a row names (see ``bounce.bounce_funcs``).
 
@@ -141,7 +140,7 @@ def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                 a = arc_point(a, v, g_eff, rest)
                 v = v + rest * g_eff
                 done = 1
-            elif bounces == MAX_BOUNCES:
+            elif bounces >= max_bounces:
                 capped = 1  # time left and a contact ahead: stay at the last contact
                 done = 1
             else:
@@ -160,7 +159,8 @@ def _ballistic_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                 # a support: gravity presses, and the normal speed is below RESTING_SPEED or the
                 # hop would last less than dt / max_bounces (2 keep |un| / |gn|)
                 resting = gn < -TANGENT_REL * wp.length(g) and (
-                    -un <= wp.max(RESTING, -gn * dt * HOP_FRACTION / keep))
+                    -un <= wp.max(RESTING, -gn * dt * HALF_HOP / (scalar(wp.max(max_bounces, 1))
+                                                                * keep)))
                 if wp.static(events):
                     write_event(frame, sphere, box, int(resting), contact, n, (dt - rest) / dt,
                                 -un, event_count_out, event_index_out, event_vector_out,

@@ -42,13 +42,12 @@ RESTING_GAP_ULPS = 16.0
 
 
 @cache
-def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
-                 broad_phase: str, events: bool = False) -> SimpleNamespace:
+def bounce_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
+                 events: bool = False) -> SimpleNamespace:
     """Build the bounce loop for one precision and one feature set.
 
     Args:
         p: precision.
-        max_bounces: cap on contacts per frame (compiled in).
         spin: update the angular momentum from contact friction (else ``L`` passes through
             untouched and no spin code is compiled).
         lossy: apply ``energy_retention`` at each bounce (else no loss code is compiled).
@@ -77,7 +76,6 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
     REST = scalar(RESTING_FRAMES_LOSSY if lossy else RESTING_FRAMES_ELASTIC)
     GAP_ULPS = scalar(RESTING_GAP_ULPS * p.eps)
     RESET_SLACK = scalar(RESET_ULPS * p.eps)
-    MAX_BOUNCES = int(max_bounces)
 
     @wp.func
     def clip_rise(contact: vec3, d: vec3, v: vec3, m: scalar, g: vec3, origin: vec3,
@@ -127,7 +125,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
     @wp.func
     def bounce_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
                     g: vec3, origin: vec3, dt: scalar, friction: scalar, max_rot: scalar,
-                    retention: scalar,
+                    retention: scalar, max_bounces: int,
                     box_center: wp.array(dtype=p.vec3), box_rotation: wp.array(dtype=p.mat33),
                     box_half_extents: wp.array(dtype=p.vec3),
                     box_radius: wp.array(dtype=p.scalar), box_extent: wp.array(dtype=p.vec3),
@@ -140,7 +138,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
                     event_index_out: wp.array2d(dtype=wp.int32),
                     event_vector_out: wp.array2d(dtype=vec3),
                     event_scalar_out: wp.array2d(dtype=scalar)):
-        """Move a sphere for one frame among the boxes, bouncing up to ``MAX_BOUNCES`` times.
+        """Move a sphere for one frame among the boxes, bouncing up to ``max_bounces`` times.
 
         Args:
             a: centre at the start [m]. v: velocity for the frame [m/s]. r: radius [m].
@@ -148,7 +146,9 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
             ``dynamics``). g: gravity [m/s^2] (only for resting contacts and the loss's
             potential). origin: potential reference point [m]. dt: frame duration [s].
             friction: ``k_f`` [kg/s]. max_rot: ``|Rot|`` clamp [rad/s]. retention: kept
-            fraction of kinetic energy per bounce. box_*: the obstacles (see ``nearest``);
+            fraction of kinetic energy per bounce. max_bounces: cap on contacts this frame (a
+            launch value, not compiled in: the loop costs the same, and each cap would be a
+            build of its own). box_*: the obstacles (see ``nearest``);
             ``box_bvh`` and ``grid_*``: the broad phase's data (see ``nearest``). frame,
             sphere: what an event row names (frame within the launch, sphere index).
             event_*: the event buffer (written only when built with ``events``).
@@ -172,7 +172,7 @@ def bounce_funcs(p: Precision, max_bounces: int, spin: bool, lossy: bool,
             if box < 0:
                 a = a + d
                 done = 1
-            elif bounces == MAX_BOUNCES:
+            elif bounces >= max_bounces:
                 capped = 1  # path left and no contact left: stay at the last contact
                 done = 1
             else:

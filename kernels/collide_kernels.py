@@ -164,8 +164,8 @@ def collide_arc_kernel(precision_name: str, broad_phase: str):
 
 
 @cache
-def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool,
-                  broad_phase: str, motion: str = "linear"):
+def bounce_kernel(precision_name: str, spin: bool, lossy: bool, broad_phase: str,
+                  motion: str = "linear"):
     """The multi-bounce kernel (sheet method 3) for one feature set.
 
     Per sphere, ``motion="linear"``: the bounce loop over the frame's straight-line displacement
@@ -178,9 +178,9 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
     p = precision(precision_name)
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     if motion == "ballistic":
-        path = ballistic_funcs(p, max_bounces, spin, lossy, broad_phase).ballistic_path
+        path = ballistic_funcs(p, spin, lossy, broad_phase).ballistic_path
     elif motion == "linear":
-        path = bounce_funcs(p, max_bounces, spin, lossy, broad_phase).bounce_path
+        path = bounce_funcs(p, spin, lossy, broad_phase).bounce_path
     else:
         raise ValueError(f"motion must be 'linear' or 'ballistic', got {motion!r}")
     dyn = dynamics_funcs(p)
@@ -209,6 +209,7 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         friction: scalar,
         max_rot: scalar,
         retention: scalar,
+        max_bounces: int,
         # In:
         position_in: wp.array(dtype=vec3),
         velocity_in: wp.array(dtype=vec3),
@@ -237,7 +238,7 @@ def bounce_kernel(precision_name: str, max_bounces: int, spin: bool, lossy: bool
         x, v_new, L, energy, bounces, capped, supported = path(
             a, v, radius[i], m, angular_momentum_in[i],
             kinetic_energy(m, v) + potential(m, g, a, zero), g, zero, dt, friction, max_rot,
-            retention,
+            retention, max_bounces,
             box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
             grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
             grid_cell_boxes, 0, i, event_count_out, event_index_out, event_vector_out,

@@ -28,8 +28,8 @@ from .variant import variant_kernel
 
 
 @cache
-def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_correction: bool,
-                 lossy: bool, broad_phase: str, events: bool = False, motion: str = "linear"):
+def frame_kernel(precision_name: str, spin: bool, energy_correction: bool, lossy: bool,
+                 broad_phase: str, events: bool = False, motion: str = "linear"):
     """Build the frame kernel for one feature set.
 
     One thread per sphere advances it by ``frame_count`` frames with its state in registers,
@@ -40,7 +40,6 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
 
     Args:
         precision_name: ``"float32"`` or ``"float64"``.
-        max_bounces: contacts per sphere per frame, compiled in.
         spin: friction torque on ``L`` at contacts and orientation integration; without it the
             angular momentum and orientation arrays are neither read nor written.
         energy_correction: reset ``|v|`` from the energy after the move; without it the speed
@@ -71,9 +70,9 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
     if motion not in ("linear", "ballistic"):
         raise ValueError(f"motion must be 'linear' or 'ballistic', got {motion!r}")
     if motion == "ballistic":
-        path = ballistic_funcs(p, max_bounces, spin, lossy, broad_phase, events).ballistic_path
+        path = ballistic_funcs(p, spin, lossy, broad_phase, events).ballistic_path
     else:
-        path = bounce_funcs(p, max_bounces, spin, lossy, broad_phase, events).bounce_path
+        path = bounce_funcs(p, spin, lossy, broad_phase, events).bounce_path
     dyn = dynamics_funcs(p)
     energy_along_gravity = dyn.energy_along_gravity
     kinetic_energy = dyn.kinetic_energy
@@ -88,7 +87,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
     @wp.func
     def linear_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
                      gravity: vec3, origin: vec3, dt: scalar, friction: scalar, max_rot: scalar,
-                     retention: scalar,
+                     retention: scalar, max_bounces: int,
                      box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
                      box_half_extents: wp.array(dtype=vec3), box_radius: wp.array(dtype=scalar),
                      box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64,
@@ -103,7 +102,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         """One frame of the linear (chord) model; returns the state and the frame's counts."""
         v = v + gravity * dt
         x, v, L, energy, bounces, capped, supported = path(
-            x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention,
+            x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention, max_bounces,
             box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
             grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
             grid_cell_boxes, frame, sphere, event_count_out, event_index_out, event_vector_out,
@@ -142,7 +141,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
     @wp.func
     def ballistic_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar,
                         m: scalar, gravity: vec3, origin: vec3, dt: scalar, friction: scalar,
-                        max_rot: scalar, retention: scalar,
+                        max_rot: scalar, retention: scalar, max_bounces: int,
                         box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
                         box_half_extents: wp.array(dtype=vec3),
                         box_radius: wp.array(dtype=scalar), box_extent: wp.array(dtype=vec3),
@@ -161,7 +160,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         rounding drift is put back through the component along gravity.
         """
         x, v, L, energy, bounces, capped, supported = path(
-            x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention,
+            x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention, max_bounces,
             box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
             grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
             grid_cell_boxes, frame, sphere, event_count_out, event_index_out, event_vector_out,
@@ -201,6 +200,7 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         friction: scalar,
         max_rot: scalar,
         retention: scalar,
+        max_bounces: int,
         radius: wp.array(dtype=scalar),
         mass: wp.array(dtype=scalar),
         frame_count: int,
@@ -249,10 +249,10 @@ def frame_kernel(precision_name: str, max_bounces: int, spin: bool, energy_corre
         for f in range(frame_count):
             x, v, L, o, energy, b, c = one_frame(
                 x, v, L, o, energy, r, m, gravity, origin, dt, friction, max_rot, retention,
-                box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
-                grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
-                grid_cell_boxes, f + 1, sphere, event_count_out, event_index_out, event_vector_out,
-                event_scalar_out)
+                max_bounces, box_center, box_rotation, box_half_extents, box_radius, box_extent,
+                box_bvh, grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin,
+                grid_cell_start, grid_cell_boxes, f + 1, sphere, event_count_out, event_index_out,
+                event_vector_out, event_scalar_out)
             bounces += b
             capped += c
             if record_every > 0:

@@ -46,7 +46,7 @@ def path_kernel(precision_name: str, lossy: bool, spin: bool):
     """Test kernel: one frame of ``ballistic_path`` per sphere (brute-force boxes)."""
     p = precision_of(precision_name)
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
-    ballistic_path = ballistic_funcs(p, MAX_BOUNCES, spin, lossy, False).ballistic_path
+    ballistic_path = ballistic_funcs(p, spin, lossy, False).ballistic_path
 
     @wp.kernel(enable_backward=False, module="unique")
     def ballistic_path_test(
@@ -68,7 +68,8 @@ def path_kernel(precision_name: str, lossy: bool, spin: bool):
         i = wp.tid()
         x, v, ang, e, bounces, capped, supported = ballistic_path(
             position_in[i], velocity_in[i], radius[i], mass[i], angular_momentum_in[i],
-            energy_in[i], gravity, origin, dt, friction, max_rot, retention, box_center,
+            energy_in[i], gravity, origin, dt, friction, max_rot, retention, MAX_BOUNCES,
+            box_center,
             box_rotation, box_half_extents, box_radius, box_extent, box_bvh, vec3(),
             vec3(scalar(1.0), scalar(1.0), scalar(1.0)), vec3(scalar(1.0), scalar(1.0),
                                                              scalar(1.0)),

@@ -33,23 +33,19 @@ def all_kernels():
     for prec, bvh in itertools.product(PRECISIONS, BROAD_PHASES):
         out.append((f"collide/{prec}/{bvh}", collide_kernel(prec, bvh)))
         out.append((f"collide-arc/{prec}/{bvh}", collide_arc_kernel(prec, bvh)))
-    for prec, cap, spin, lossy, bvh in itertools.product(PRECISIONS, (1, 8), FLAGS, FLAGS,
-                                                         BROAD_PHASES):
-        out.append((f"bounce/{prec}/{cap}/{spin}/{lossy}/{bvh}",
-                    bounce_kernel(prec, cap, spin, lossy, bvh)))
-        out.append((f"bounce-arc/{prec}/{cap}/{spin}/{lossy}/{bvh}",
-                    bounce_kernel(prec, cap, spin, lossy, bvh, motion="ballistic")))
-    for prec, cap, spin, corr, lossy, bvh in itertools.product(PRECISIONS, (1, 8), FLAGS, FLAGS,
-                                                               FLAGS, BROAD_PHASES):
-        out.append((f"frame/{prec}/{cap}/{spin}/{corr}/{lossy}/{bvh}",
-                    frame_kernel(prec, cap, spin, corr, lossy, bvh)))
-        if cap == 8:
-            out.append((f"frame/{prec}/{cap}/{spin}/{corr}/{lossy}/{bvh}/events",
-                        frame_kernel(prec, cap, spin, corr, lossy, bvh, events=True)))
-            for events in FLAGS:
-                out.append((f"frame-arc/{prec}/{cap}/{spin}/{corr}/{lossy}/{bvh}/{events}",
-                            frame_kernel(prec, cap, spin, corr, lossy, bvh, events=events,
-                                         motion="ballistic")))
+    for prec, spin, lossy, bvh in itertools.product(PRECISIONS, FLAGS, FLAGS, BROAD_PHASES):
+        out.append((f"bounce/{prec}/{spin}/{lossy}/{bvh}",
+                    bounce_kernel(prec, spin, lossy, bvh)))
+        out.append((f"bounce-arc/{prec}/{spin}/{lossy}/{bvh}",
+                    bounce_kernel(prec, spin, lossy, bvh, motion="ballistic")))
+    for prec, spin, corr, lossy, bvh in itertools.product(PRECISIONS, FLAGS, FLAGS, FLAGS,
+                                                          BROAD_PHASES):
+        for events in FLAGS:
+            out.append((f"frame/{prec}/{spin}/{corr}/{lossy}/{bvh}/{events}",
+                        frame_kernel(prec, spin, corr, lossy, bvh, events=events)))
+            out.append((f"frame-arc/{prec}/{spin}/{corr}/{lossy}/{bvh}/{events}",
+                        frame_kernel(prec, spin, corr, lossy, bvh, events=events,
+                                     motion="ballistic")))
     return out
 
 

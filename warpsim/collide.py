@@ -208,11 +208,12 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
     dev = resolve_device(device)
     method, grid = broad.choose(broad_phase, boxes, broad.reach(pos, vel, rad, g, dt),
                                 p.np_dtype)
-    kernel = bounce_kernel(p.name, max_bounces, friction > 0.0, retention < 1.0, method,
+    kernel = bounce_kernel(p.name, friction > 0.0, retention < 1.0, method,
                            **({} if motion == "linear" else {"motion": motion}))
     model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt, gravity=g,
                       friction=friction,
-                      max_angular_speed=max_rot, energy_retention=retention)
+                      max_angular_speed=max_rot, energy_retention=retention,
+                      max_bounces=max_bounces)
     spheres = Spheres(radius=to_device(rad, p.scalar, p, dev),
                       mass=to_device(mas, p.scalar, p, dev))
     state = {"position": to_device(pos, p.vec3, p, dev),

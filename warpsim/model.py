@@ -54,6 +54,7 @@ class Model:
         gravity: [m/s^2], world frame. origin: reference point of the potential energy [m].
         dt: frame duration [s]. friction: ``k_f`` [kg/s]. max_rot: clamp on ``|Rot|`` [rad/s].
         retention: fraction of the kinetic energy kept at each contact.
+        max_bounces: cap on contacts per sphere per frame (a launch value, not compiled in).
         precision: the :class:`~warpsim.kernels.precision.Precision` of every array and value.
         device: the Warp device holding the arrays.
         bvh: the :class:`warp.Bvh` behind ``box_bvh`` (kept here so that it lives as long as the
@@ -79,6 +80,7 @@ class Model:
     friction: object
     max_rot: object
     retention: object
+    max_bounces: int
     precision: Precision
     device: object
     bvh: wp.Bvh | None = None
@@ -138,7 +140,7 @@ def to_device(values: np.ndarray, dtype, p: Precision, device) -> wp.array:
 def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt: float,
               grid: Grid | None = None, gravity=(0.0, 0.0, 0.0), origin=(0.0, 0.0, 0.0),
               friction: float = 0.0, max_angular_speed: float = 50.0,
-              energy_retention: float = 1.0) -> Model:
+              energy_retention: float = 1.0, max_bounces: int = 8) -> Model:
     """The obstacles and physics constants as a :class:`Model` on ``device``.
 
     The values must already be validated (``warpsim.validation``; :class:`warpsim.Scene` and
@@ -154,6 +156,7 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
         dt: frame duration [s]. gravity: [m/s^2]. origin: potential reference point [m].
         friction: ``k_f`` [kg/s]. max_angular_speed: ``|Rot|`` clamp [rad/s].
         energy_retention: kept fraction of kinetic energy per contact.
+        max_bounces: cap on contacts per sphere per frame.
     """
     dtype = p.np_dtype
     center = boxes.center.astype(dtype)
@@ -179,7 +182,8 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
         gravity=p.vec3(*np.asarray(gravity, dtype=np.float64)),
         origin=p.vec3(*np.asarray(origin, dtype=np.float64)),
         dt=p.scalar(dt), friction=p.scalar(friction), max_rot=p.scalar(max_angular_speed),
-        retention=p.scalar(energy_retention), precision=p, device=device, bvh=tree)
+        retention=p.scalar(energy_retention), max_bounces=int(max_bounces), precision=p,
+        device=device, bvh=tree)
 
 
 def _grid_fields(grid: Grid | None, p: Precision, device) -> dict:

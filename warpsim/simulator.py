@@ -164,7 +164,7 @@ class Simulator:
         """Sphere masses [kg], (N,), float64."""
         self._seconds = 0.0
         self._half_kick = 0.5 * self.dt if self.motion == "linear" else 0.0
-        self._features = (self.precision, self.max_bounces, self.spin, self.energy_correction,
+        self._features = (self.precision, self.spin, self.energy_correction,
                           scene.energy_retention < 1.0, self.broad_phase)
         self._motion_kw = {} if self.motion == "linear" else {"motion": self.motion}
         self._kernel = frame_kernel(*self._features, **self._motion_kw)
@@ -190,7 +190,8 @@ class Simulator:
                                gravity=scene.gravity, origin=self.energy_origin,
                                friction=scene.friction,
                                max_angular_speed=scene.max_angular_speed,
-                               energy_retention=scene.energy_retention)
+                               energy_retention=scene.energy_retention,
+                               max_bounces=self.max_bounces)
         """The scene on the device (:class:`warpsim.model.Model`)."""
         self.spheres = put_spheres(swarm.radius, swarm.mass, p, dev)
         """The per-sphere constants on the device (:class:`warpsim.model.Spheres`)."""
