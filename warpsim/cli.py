@@ -358,7 +358,7 @@ def _cmd_run(args) -> int:
     print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "
           f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
           f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
-    build = sim.build()  # reported apart from the run's speed
+    build = sim.build(events=bool(args.events))  # reported apart from the run's speed
     if start:
         sim.step(start)
     traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)

@@ -229,14 +229,20 @@ class Simulator:
 
     # -- stepping -----------------------------------------------------------------------------
 
-    def build(self) -> float:
+    def build(self, events: bool = False) -> float:
         """Build (or load from Warp's cache) this simulator's kernel now; returns seconds.
 
-        :meth:`step` does it on first use anyway; calling it first keeps the build time out of
-        a timed run.
+        :meth:`step` and :meth:`run` do it on first use anyway; calling it first keeps the build
+        time out of a timed run.
+
+        Args:
+            events: also build the variant that records contacts (``run(events=True)``).
         """
         start = time.perf_counter()
         wp.load_module(self._kernel.module, device=self.device)
+        if check.flag("events", events):
+            kernel = frame_kernel(*self._features, events=True, **self._motion_kw)
+            wp.load_module(kernel.module, device=self.device)
         return time.perf_counter() - start
 
     def _launch(self, frames: int, every: int = 0, records: dict | None = None,
