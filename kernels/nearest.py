@@ -190,7 +190,7 @@ def grid_funcs(p: Precision) -> SimpleNamespace:
     brute force: the results are bit-identical.
 
     Returns:
-        Namespace with ``grid_fits`` and ``nearest_hit_cell``.
+        Namespace with ``grid_fits``, ``grid_fits_path`` and ``nearest_hit_cell``.
     """
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     sweep_box_world = nearest_funcs(p).sweep_box_world
@@ -199,10 +199,10 @@ def grid_funcs(p: Precision) -> SimpleNamespace:
     SLACK = scalar(1.0 + REJECT_SLACK)
 
     @wp.func
-    def grid_fits(a: vec3, d: vec3, r: scalar, grid_lower: vec3, grid_cell: vec3,
-                  grid_inv_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar):
-        """``(fits, cell)``: whether the segment's query box lies in the grown cell of its
-        start point, and that cell's linear index (x fastest).
+    def grid_fits_path(a: vec3, b: vec3, grow: vec3, grid_lower: vec3, grid_cell: vec3,
+                       grid_inv_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar):
+        """``(fits, cell)``: whether the box spanned by ``a`` and ``b``, grown by ``grow`` per
+        axis, lies in the grown cell of ``a``, and that cell's linear index (x fastest).
 
         ``grid_margin`` is the margin the host listed the boxes for, less twice the rounding pad
         of any coordinate inside the grid (``BOUNDS_PAD_REL`` of the grid's largest coordinate),
@@ -212,20 +212,27 @@ def grid_funcs(p: Precision) -> SimpleNamespace:
         fits = int(1)
         index = int(0)
         stride = int(1)
-        b = a + d
-        grow = r * SLACK
         for i in range(3):
             c = int(wp.floor((a[i] - grid_lower[i]) * grid_inv_cell[i]))
             if c < 0 or c >= grid_dims[i]:
                 fits = 0
             else:
                 cell_lo = grid_lower[i] + scalar(c) * grid_cell[i]
-                if (wp.min(a[i], b[i]) - grow < cell_lo - grid_margin
-                        or wp.max(a[i], b[i]) + grow > cell_lo + grid_cell[i] + grid_margin):
+                if (wp.min(a[i], b[i]) - grow[i] < cell_lo - grid_margin
+                        or wp.max(a[i], b[i]) + grow[i] > cell_lo + grid_cell[i] + grid_margin):
                     fits = 0
                 index += c * stride
                 stride *= grid_dims[i]
         return fits, index
+
+    @wp.func
+    def grid_fits(a: vec3, d: vec3, r: scalar, grid_lower: vec3, grid_cell: vec3,
+                  grid_inv_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar):
+        """:func:`grid_fits_path` for the segment ``a -> a + d`` of a sphere of radius ``r``:
+        its query box is grown by ``r (1 + REJECT_SLACK)``, as the per-box reject's."""
+        grow = r * SLACK
+        return grid_fits_path(a, a + d, vec3(grow, grow, grow), grid_lower, grid_cell,
+                              grid_inv_cell, grid_dims, grid_margin)
 
     @wp.func
     def nearest_hit_cell(a: vec3, d: vec3, r: scalar, cell: int,
@@ -249,7 +256,8 @@ def grid_funcs(p: Precision) -> SimpleNamespace:
                 best_n = normal
         return best, best_t, best_n
 
-    return SimpleNamespace(grid_fits=grid_fits, nearest_hit_cell=nearest_hit_cell)
+    return SimpleNamespace(grid_fits=grid_fits, grid_fits_path=grid_fits_path,
+                           nearest_hit_cell=nearest_hit_cell)
 
 
 @cache

@@ -25,6 +25,7 @@ from .nearest import (
     BOUNDS_PAD_REL,
     BROAD_PHASES,
     REJECT_SLACK,
+    grid_funcs,
     nearest_funcs,
 )
 from .precision import Precision
@@ -49,6 +50,7 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
     sweep_rounded_box_arc = arc.sweep_rounded_box_arc
     arc_point = arc.arc_point
     linear = nearest_funcs(p)
+    grid_fits_path = grid_funcs(p).grid_fits_path
     sweep_box_world = linear.sweep_box_world
     nearest_hit = linear.nearest_hit
     nearest_hit_bvh = linear.nearest_hit_bvh
@@ -243,24 +245,10 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
         """``(fits, cell)`` for an arc, as ``nearest.grid_funcs``'s ``grid_fits`` for a chord:
         the chord's bounding box grown by ``(r + sagitta) (1 + REJECT_SLACK)`` per axis must lie
         in the grown cell of ``a``; then only the cell's boxes can pass :func:`arc_apart`."""
-        fits = int(1)
-        index = int(0)
-        stride = int(1)
-        b = arc_point(a, v, g, tau)
         sag = sagitta(g, tau)
-        for i in range(3):
-            c = int(wp.floor((a[i] - grid_lower[i]) * grid_inv_cell[i]))
-            if c < 0 or c >= grid_dims[i]:
-                fits = 0
-            else:
-                grow = (r + sag[i]) * SLACK
-                cell_lo = grid_lower[i] + scalar(c) * grid_cell[i]
-                if (wp.min(a[i], b[i]) - grow < cell_lo - grid_margin
-                        or wp.max(a[i], b[i]) + grow > cell_lo + grid_cell[i] + grid_margin):
-                    fits = 0
-                index += c * stride
-                stride *= grid_dims[i]
-        return fits, index
+        grow = vec3((r + sag[0]) * SLACK, (r + sag[1]) * SLACK, (r + sag[2]) * SLACK)
+        return grid_fits_path(a, arc_point(a, v, g, tau), grow, grid_lower, grid_cell,
+                              grid_inv_cell, grid_dims, grid_margin)
 
     @wp.func
     def nearest_hit_arc_cell(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, cell: int,
