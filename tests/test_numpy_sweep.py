@@ -1,4 +1,5 @@
-"""The plain NumPy sweep (the benchmark's baseline) against the float64 references.
+"""The plain NumPy sweep (``benchmarks/numpy_sweep.py``, the sweep study's baseline) against
+the float64 references.
 
 The named analytic cases of ``test_reference.py`` run through it in both precisions, then
 random segments and groups of boxes against :func:`reference.bounce_reference`. Float64 must
@@ -17,7 +18,7 @@ from reference import (
 from test_reference import CASES
 
 import warpsim as ws
-from warpsim.numpy_sweep import sweep_boxes_numpy
+from benchmarks.numpy_sweep import sweep_boxes_numpy
 
 DTYPES = [np.float64, np.float32]
 

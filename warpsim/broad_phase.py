@@ -14,7 +14,8 @@ go to the lower index):
   instead of 22.
 
 :func:`choose` turns ``broad_phase="auto"`` into one of them from a cost model measured on this
-package's kernels (see BENCHMARKS.md, "Broad phase").
+package's kernels (see BENCHMARKS.md, "Simulator speed" and its table of cost against the
+number of boxes).
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ MAX_CELLS_PER_AXIS = 256
 HOST_PAD_REL = 10.0 * BOUNDS_PAD_REL
 
 #: Cost model of ``auto``, in units of one per-box reject test (measured on the CPU, float32,
-#: standard room and random boxes; BENCHMARKS.md "Broad phase"): a query costs ``BRUTE_FIXED +
+#: standard room and random boxes; BENCHMARKS.md "Simulator speed"): a query costs ``BRUTE_FIXED +
 #: K`` by brute force, ``GRID_FIXED + L`` through a grid cell listing ``L`` boxes (plus the
 #: fallback for the paths that do not fit), ``BVH_FIXED + BVH_PER_LEVEL log2 K`` through the
 #: BVH.

@@ -1,5 +1,5 @@
 """The plain vectorised NumPy sweep: spheres against rounded boxes, the way a Python user would
-write it without Warp. It is the side-by-side baseline of the benchmark.
+write it without Warp. It is the side-by-side baseline of ``python -m benchmarks.sweep``.
 
 Same algorithm as the kernels (the sheet's methods 1 and 2), vectorised over the ``N`` spheres
 with a Python loop over the ``K`` boxes. Per box, in the box's local frame (``a_l = M^T (a - c)``,
@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import validation as check
-from .obstacles import RoundedBox, RoundedBoxes
+from warpsim import validation as check
+from warpsim.obstacles import RoundedBox, RoundedBoxes
 
 #: A direction component at most this many machine epsilons of the largest one is parallel to
 #: its slab: below one ulp, its motion over the segment is lost in rounding anyway, and the flag
