@@ -396,17 +396,9 @@ def plot(result: dict, out: str) -> list[str]:
             tag = (f"mb {r['max_bounces']}" if r["family"] == "max_bounces"
                    else f"1/{r['rate']}")
             ax.annotate(tag, (xi, yi), fontsize=6, textcoords="offset points", xytext=(3, 3))
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    _log_ticks(ax, LogLocator, LogFormatterSciNotation)
-    ax.set_xlabel("simulated sphere-seconds per wall second (sphere-frames/s x dt)")
-    ax.set_ylabel("position error [m]")
-    ax.set_title(title, fontsize=9)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    paths.append(_save(fig, os.path.join(out, "pareto.png")))
-    plt.close(fig)
+    paths.append(_finish_log_plot(
+        plt, fig, ax, "simulated sphere-seconds per wall second (sphere-frames/s x dt)", title,
+        os.path.join(out, "pareto.png"), LogLocator, LogFormatterSciNotation))
 
     fig, ax = plt.subplots(figsize=(7.0, 4.6), dpi=90)
     for i, label in enumerate(labels):
@@ -420,17 +412,9 @@ def plot(result: dict, out: str) -> list[str]:
         text = (f"{label} (order {order:.2f})" if order is not None
                 else f"{label} (rounding only)")
         ax.plot(dt, y, "o-", label=text, ms=4, color=f"C{i}")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    _log_ticks(ax, LogLocator, LogFormatterSciNotation)
-    ax.set_xlabel("dt [s]")
-    ax.set_ylabel("position error [m]")
-    ax.set_title(title, fontsize=9)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    paths.append(_save(fig, os.path.join(out, "convergence.png")))
-    plt.close(fig)
+    paths.append(_finish_log_plot(plt, fig, ax, "dt [s]", title,
+                                  os.path.join(out, "convergence.png"), LogLocator,
+                                  LogFormatterSciNotation))
     return paths
 
 
@@ -468,6 +452,22 @@ def markdown(result: dict) -> str:
                   + "; ".join(orders) + "."]
     lines += [f"Note: {n}" for n in result["notes"]]
     return "\n".join(lines) + "\n"
+
+
+def _finish_log_plot(plt, fig, ax, xlabel: str, title: str, path: str, locator, formatter):
+    """Log-log axes, labels, grid and legend of a study plot; saves it and returns its path."""
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    _log_ticks(ax, locator, formatter)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("position error [m]")
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    saved = _save(fig, path)
+    plt.close(fig)
+    return saved
 
 
 def _log_ticks(ax, locator, formatter) -> None:
