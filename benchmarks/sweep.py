@@ -195,7 +195,7 @@ def run(cfg: dict, device) -> dict:
         ("max|dt|", "max_abs_dt", ".2g")])
     broad = [broad_phase_row(cfg["broad_n"], k, cfg, device) for k in cfg["broad_k"]]
     print_table(f"Sweep broad phase, float32: brute force against BVH (N = {cfg['broad_n']:,}; "
-                f"'auto' takes the BVH from K = {BVH_MIN_BOXES})", broad, [
+                f"without a grid, the BVH from K = {BVH_MIN_BOXES})", broad, [
                     ("N", "n", ",d"), ("K", "k", "d"), ("hit", "hit_fraction", ".1%"),
                     ("brute ns/sph", "brute_ns_per_sphere", ".3g"),
                     ("BVH ns/sph", "bvh_ns_per_sphere", ".3g"),

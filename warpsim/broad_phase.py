@@ -177,44 +177,38 @@ def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32) -> Grid | N
                 cell_start=start.astype(np.int32), cell_boxes=box_ids.astype(np.int32))
 
 
-def choose(requested: str, boxes: RoundedBoxes, reach_m: float, dtype=np.float32, *,
-           grid: bool = True) -> tuple[str, Grid | None]:
+def exhaustive(box_count: int) -> tuple[str, float]:
+    """The method that tries every candidate without a grid, and its cost by the model: the BVH
+    from ``BVH_MIN_BOXES`` boxes on (where it was measured to win), every box below."""
+    if box_count >= BVH_MIN_BOXES:
+        return "bvh", BVH_FIXED + BVH_PER_LEVEL * math.log2(box_count)
+    return "brute", BRUTE_FIXED + box_count
+
+
+def choose(requested: str, boxes: RoundedBoxes, reach_m: float, dtype=np.float32,
+           ) -> tuple[str, Grid | None]:
     """The broad phase to compile, and its grid when it has one.
 
     Args:
-        requested: ``"auto"``, ``"brute"``, ``"bvh"`` or ``"grid"`` (a grid falls back to the
-            BVH from ``BVH_MIN_BOXES`` boxes on, to every box below).
+        requested: ``"auto"``, ``"brute"``, ``"bvh"`` or ``"grid"``. A grid falls back to
+            :func:`exhaustive`'s method for the paths that leave their cell's margin (``"grid"``
+            over every box, ``"grid-bvh"`` over the BVH); ``"auto"`` takes the grid when the
+            cost model puts its mean cell list below the exhaustive method's cost, else that
+            method.
         boxes: the obstacles.
         reach_m: how far a frame's path reaches [m] (see :func:`reach`).
         dtype: the kernels' float type.
-        grid: whether the kernels can use a grid (the ballistic model's arcs cannot: a request
-            for one gets the BVH or every box).
 
     Returns:
         ``(name, grid)`` with ``name`` one of ``kernels.nearest.BROAD_PHASES``.
     """
     choice = check.broad_phase(requested)
-    k = len(boxes)
-    fallback = "bvh" if k >= BVH_MIN_BOXES else "brute"
     if choice in ("brute", "bvh"):
         return choice, None
-    if not grid:
-        if choice == "grid":
-            return fallback, None
-        return ("bvh" if BVH_FIXED + BVH_PER_LEVEL * math.log2(max(k, 2)) < BRUTE_FIXED + k
-                else "brute"), None
+    k = len(boxes)
+    fallback, fallback_cost = exhaustive(k)
     grid = build_grid(boxes, reach_m, dtype) if k else None
-    if choice == "grid":
-        if grid is None:
-            return fallback, None
-        return ("grid-bvh" if fallback == "bvh" else "grid"), grid
-    # auto: the cheapest by the cost model
-    brute = BRUTE_FIXED + k
-    bvh = BVH_FIXED + BVH_PER_LEVEL * math.log2(max(k, 2))
-    costs = {"brute": brute, "bvh": bvh}
-    if grid is not None:
-        costs["grid"] = GRID_FIXED + grid.mean_list_length()
-    best = min(costs, key=costs.get)
-    if best == "grid":
-        return ("grid-bvh" if bvh < brute else "grid"), grid
-    return best, None
+    if grid is None or (choice == "auto"
+                        and GRID_FIXED + grid.mean_list_length() >= fallback_cost):
+        return fallback, None
+    return ("grid-bvh" if fallback == "bvh" else "grid"), grid

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from . import validation as check
 from .kernels.nearest import BOUNDS_PAD_REL, REJECT_SLACK
 
-#: ``broad_phase="auto"`` uses the BVH from this many boxes on (else the loop over all boxes).
+#: Without a grid, the BVH is used from this many boxes on, every box below
+#: (``warpsim.broad_phase.exhaustive``: the fallback of the grid, and ``"auto"``'s choice when
+#: the grid does not pay).
 #: Measured on the CPU (float32, 1e4 spheres at 5 and 60 m/s): in the standard room with its
 #: plates made more numerous, the two tie at K = 28 and the BVH wins from K = 32 (1.1-1.2x,
 #: 1.6-1.8x at K = 64); in the random-box sweep scene it wins from K = 12 already.
@@ -46,18 +47,4 @@ def bvh_bounds(center: np.ndarray, extent: np.ndarray) -> tuple[np.ndarray, np.n
     return lower32, upper32
 
 
-def use_bvh(broad_phase: str, box_count: int) -> bool:
-    """Whether a scene of ``box_count`` boxes runs the BVH broad phase.
-
-    Args:
-        broad_phase: ``"bvh"``, ``"brute"`` (every box tried per sphere), or ``"auto"`` (the BVH
-            from ``BVH_MIN_BOXES`` boxes on).
-
-    Raises:
-        ValueError: ``broad_phase`` is none of these.
-    """
-    choice = check.broad_phase(broad_phase)
-    return choice == "bvh" or (choice == "auto" and box_count >= BVH_MIN_BOXES)
-
-
-__all__ = ["BVH_MIN_BOXES", "bvh_bounds", "resolve_device", "use_bvh"]
+__all__ = ["BVH_MIN_BOXES", "bvh_bounds", "resolve_device"]
