@@ -166,10 +166,12 @@ class Simulator:
         """Sphere masses [kg], (N,), float64."""
         self._seconds = 0.0
         self._half_kick = 0.5 * self.dt if self.motion == "linear" else 0.0
-        self._features = (self.precision, self.spin, self.energy_correction,
-                          scene.energy_retention < 1.0, self.broad_phase)
-        self._motion_kw = {} if self.motion == "linear" else {"motion": self.motion}
-        self._kernel = frame_kernel(*self._features, **self._motion_kw)
+        # what the kernel is built for (the factory's cache key: always passed the same way)
+        self._features = {"precision_name": self.precision, "spin": self.spin,
+                          "energy_correction": self.energy_correction,
+                          "lossy": scene.energy_retention < 1.0,
+                          "broad_phase": self.broad_phase, "motion": self.motion}
+        self._kernel = frame_kernel(**self._features, events=False)
         self._upload(swarm)
         self._shards = _shards(self._n, self.workers)
         self._executor = None
@@ -243,7 +245,7 @@ class Simulator:
         start = time.perf_counter()
         wp.load_module(self._kernel.module, device=self.device)
         if check.flag("events", events):
-            kernel = frame_kernel(*self._features, events=True, **self._motion_kw)
+            kernel = frame_kernel(**self._features, events=True)
             wp.load_module(kernel.module, device=self.device)
         return time.perf_counter() - start
 
@@ -256,7 +258,7 @@ class Simulator:
         if records is None:
             records = self._no_records
         kernel = (self._kernel if events is None
-                  else frame_kernel(*self._features, events=True, **self._motion_kw))
+                  else frame_kernel(**self._features, events=True))
         values = {"frame_count": int(frames), "record_every": int(every)}
         shards = self._shards if len(self._shards) > 1 else [None]
         buffers = events if events is not None else [self._no_events] * len(shards)

@@ -30,8 +30,14 @@ def closest_surface(local: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np
     """
     q = np.clip(local, -half, half)
     diff = local - q
-    dist_out = np.linalg.norm(diff, axis=1)
-    outside = dist_out > 0.0
+    # scaled by the largest component first, so that a tiny offset (1e-161 m) whose square
+    # would underflow still gives a unit normal and its exact length
+    scale = np.max(np.abs(diff), axis=1)
+    outside = scale > 0.0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = diff / scale[:, None]
+    size = np.where(outside, np.linalg.norm(np.where(outside[:, None], unit, 0.0), axis=1), 0.0)
+    dist_out = scale * size
     depth = half - np.abs(local)                      # per axis, >= 0 inside
     axis = np.argmin(depth, axis=1)
     rows = np.arange(len(local))
@@ -42,7 +48,7 @@ def closest_surface(local: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np
     surface[rows, axis] = sign * half[axis]
     dist = -depth[rows, axis]
     with np.errstate(invalid="ignore", divide="ignore"):
-        n_out = diff / dist_out[:, None]
+        n_out = unit / size[:, None]
     normal = np.where(outside[:, None], n_out, normal)
     surface = np.where(outside[:, None], q, surface)
     dist = np.where(outside, dist_out, dist)
