@@ -44,8 +44,8 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
     """Build the group-query ``@wp.func``s for one precision.
 
     Returns:
-        Namespace with ``sweep_box_world``, ``nearest_hit``, ``nearest_hit_bvh`` and
-        ``contact_centre``.
+        Namespace with ``sweep_box_world``, ``nearest_hit``, ``nearest_hit_bvh``,
+        ``contact_centre`` and ``separate``.
     """
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     sweep_rounded_box = rounded_box_funcs(p).sweep_rounded_box
@@ -62,6 +62,17 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         return wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2]))
 
     @wp.func
+    def separate(contact: vec3, travel: vec3, normal: vec3, big_r: scalar, extent: vec3):
+        """``contact`` moved out along the unit ``normal`` by ``SEPARATION_ULPS`` ulps of the
+        computation's scale (``|contact|``, the path ``travel`` it came along, the box's size)
+        when the Minkowski radius ``big_r`` is below that: else bit for bit."""
+        lift = SEPARATION * wp.max(wp.max(inf_norm(contact), inf_norm(travel)), inf_norm(extent))
+        out = contact
+        if big_r < lift:
+            out = contact + lift * normal
+        return out
+
+    @wp.func
     def contact_centre(a: vec3, t: scalar, d: vec3, normal: vec3, big_r: scalar, extent: vec3):
         """The centre ``a + t d`` at a contact, kept strictly on the side the sphere came from.
 
@@ -70,11 +81,7 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         a sharp surface, so it is moved out along the unit ``normal`` by that many ulps; any larger
         radius leaves it bit for bit.
         """
-        contact = a + t * d
-        lift = SEPARATION * wp.max(wp.max(inf_norm(contact), inf_norm(d)), inf_norm(extent))
-        if big_r < lift:
-            contact = contact + lift * normal
-        return contact
+        return separate(a + t * d, d, normal, big_r, extent)
 
     @wp.func
     def sweep_box_world(a: vec3, d: vec3, r: scalar, center: vec3, rotation: mat33,
@@ -169,7 +176,8 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         return best, best_t, best_n
 
     return SimpleNamespace(sweep_box_world=sweep_box_world, nearest_hit=nearest_hit,
-                           nearest_hit_bvh=nearest_hit_bvh, contact_centre=contact_centre)
+                           nearest_hit_bvh=nearest_hit_bvh, contact_centre=contact_centre,
+                           separate=separate)
 
 
 #: The broad phases a kernel can be built with (see :func:`model_nearest_hit`).

@@ -30,12 +30,6 @@ from .nearest import (
 )
 from .precision import Precision
 
-#: A contact centre on the arc carries rounding of a few ulps of its coordinates, the chord and
-#: the box's size; when the Minkowski radius is below this many of those ulps (a point against a
-#: sharp box or a zero-thickness plate) that rounding could put it behind the surface it hit, so
-#: it is moved out along the normal by that many ulps (as the linear model does).
-SEPARATION_ULPS = 16.0
-
 
 @cache
 def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
@@ -50,6 +44,7 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
     sweep_rounded_box_arc = arc.sweep_rounded_box_arc
     arc_point = arc.arc_point
     linear = nearest_funcs(p)
+    separate = linear.separate
     grid_fits_path = grid_funcs(p).grid_fits_path
     sweep_box_world = linear.sweep_box_world
     nearest_hit = linear.nearest_hit
@@ -60,15 +55,10 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
     SLACK = scalar(1.0 + REJECT_SLACK)
     PAD_REL = scalar(BOUNDS_PAD_REL)
     PAD_ABS = scalar(BOUNDS_PAD_ABS)
-    SEPARATION = scalar(SEPARATION_ULPS * p.eps)
 
     @wp.func
     def is_zero(x: vec3):
         return x[0] == ZERO and x[1] == ZERO and x[2] == ZERO
-
-    @wp.func
-    def inf_norm(x: vec3):
-        return wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2]))
 
     @wp.func
     def sagitta(g: vec3, tau: scalar):
@@ -227,16 +217,12 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
                            extent: vec3):
         """The centre on the arc at a contact, kept on the side the sphere came from.
 
-        When the Minkowski radius ``big_r`` is below ``SEPARATION_ULPS`` ulps of the scale of
-        the computation (the contact's coordinates, the displacement, the box's size) it is
-        moved out along the unit ``normal`` by that many ulps; else it is ``x(s)`` bit for bit.
+        As ``nearest.contact_centre`` (``nearest.separate``, with the displacement from ``a`` as
+        the path): moved out along the unit ``normal`` only when the Minkowski radius ``big_r``
+        is below the rounding, else ``x(s)`` bit for bit.
         """
         contact = arc_point(a, v, g, s)
-        lift = SEPARATION * wp.max(wp.max(inf_norm(contact), inf_norm(contact - a)),
-                                   inf_norm(extent))
-        if big_r < lift:
-            contact = contact + lift * normal
-        return contact
+        return separate(contact, contact - a, normal, big_r, extent)
 
     @wp.func
     def arc_grid_fits(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, grid_lower: vec3,

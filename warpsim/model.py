@@ -85,10 +85,6 @@ class Model:
     device: object
     bvh: wp.Bvh | None = None
 
-    @property
-    def box_count(self) -> int:
-        return int(self.box_center.shape[0])
-
 
 @dataclass
 class Spheres:
