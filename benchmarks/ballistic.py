@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import warpsim as ws
-from warpsim import reference
+from warpsim.analysis import reference
 
 DEFAULT_OUT = "bench-results/ballistic.json"
 STEPS = (1 / 30, 1 / 60, 1 / 120, 1 / 240)

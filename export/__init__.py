@@ -9,7 +9,7 @@ if __name__ != "warpsim.export":  # imported as a bare ``export``: the package w
 # The guard must run first, so these imports come after it on purpose.
 from .files import check_writable  # noqa: E402
 from .preview import draw_frame, render_preview  # noqa: E402
-from .usd import (  # noqa: E402
+from .usd_write import (  # noqa: E402
     LargeOutputWarning,
     estimate_usd_bytes,
     half_orientations,

@@ -51,7 +51,7 @@ from pxr import Sdf, Tf, Usd, UsdGeom, Vt
 
 from ..trajectory import Trajectory
 from .files import atomic_output
-from .usd import (
+from .usd_write import (
     DEGREES_PER_RADIAN,
     PROTOTYPE,
     SPHERES,

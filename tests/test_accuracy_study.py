@@ -8,7 +8,7 @@ import pytest
 from conftest import closed_room
 
 import warpsim as ws
-from warpsim import accuracy, error_report, reference
+from warpsim.analysis import accuracy, error_report, reference
 
 #: Measured order of convergence without the energy reset must lie in this band. Semi-implicit
 #: Euler is exact at frame times in free flight (from the model's own start velocity); at a floor

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import warpsim as ws
-from warpsim import reference
+from warpsim.analysis import reference
 
 G = 9.81
 

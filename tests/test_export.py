@@ -18,7 +18,7 @@ from pxr import Usd, UsdGeom, UsdShade, UsdUtils
 
 import warpsim
 import warpsim.export.files as files_module
-import warpsim.export.usd as usd_module
+import warpsim.export.usd_write as usd_module
 from warpsim.export import (
     LargeOutputWarning,
     estimate_usd_bytes,

@@ -45,7 +45,7 @@ def __getattr__(name):
         import importlib
 
         return importlib.import_module(".export", __name__)
-    if name in ("reference", "error_report", "accuracy", "distributed"):  # lazy: optional parts
+    if name in ("analysis", "distributed"):  # lazy: the reference, the studies, Dask
         import importlib
 
         return importlib.import_module(f".{name}", __name__)

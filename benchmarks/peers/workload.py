@@ -245,7 +245,7 @@ def reference_positions(work: Workload, sample: int, frames: int = ERROR_HORIZON
     ``(None, 0.0, reason)`` when this warpsim has no reference yet.
     """
     try:
-        from warpsim import reference
+        from warpsim.analysis import reference
     except ImportError as exc:
         return None, 0.0, f"warpsim.reference is not available ({exc})"
     times = np.arange(frames + 1) * work.dt

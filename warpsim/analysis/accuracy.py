@@ -163,7 +163,7 @@ def _names(name: str, text: str, allowed) -> tuple[str, ...]:
 
 def _config(args) -> dict:
     """Everything checked before the first simulation: scene, numbers, output, plotting."""
-    from .scene import Scene
+    from ..scene import Scene
 
     base = QUICK if args.quick else FULL
     scene = Scene.load(args.scene)
@@ -229,7 +229,7 @@ def _scene_with(scene, energy_correction: bool):
 
 def _simulator(scene, swarm, s: Setting, device):
     """A simulator for a setting, or None when this simulator has no such motion model."""
-    from .simulator import Simulator
+    from ..simulator import Simulator
 
     kwargs = dict(dt=s.dt, max_bounces=s.max_bounces, device=device, precision=s.precision)
     if s.motion != "linear":

@@ -47,11 +47,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import validation as check
+from .. import validation as check
+from ..scene import Scene
+from ..swarm import Swarm
+from ..trajectory import Trajectory
 from .reference import ReferenceRun, simulate
-from .scene import Scene
-from .swarm import Swarm
-from .trajectory import Trajectory
 
 #: The short horizons [s] at which position errors are reported.
 HORIZONS = (0.1, 0.5, 1.0)
@@ -194,7 +194,7 @@ def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, see
     Raises:
         ValueError: a bad argument (naming it).
     """
-    from .simulator import Simulator
+    from ..simulator import Simulator
 
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a warpsim.Scene, got {type(scene).__name__}")
@@ -522,7 +522,7 @@ def reference_figures(ref: ReferenceRun) -> dict:
 
 def _like(sim, scene: Scene, sub: Swarm):
     """A simulator for ``sub`` with ``sim``'s settings."""
-    from .simulator import Simulator
+    from ..simulator import Simulator
 
     kwargs = dict(dt=sim.dt, max_bounces=sim.max_bounces, device=sim.device,
                   precision=sim.precision, broad_phase=sim.broad_phase)

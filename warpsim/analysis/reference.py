@@ -51,10 +51,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import validation as check
-from .obstacles import quat_to_matrix
-from .scene import Scene
-from .swarm import Swarm
+from .. import validation as check
+from ..obstacles import quat_to_matrix
+from ..scene import Scene
+from ..swarm import Swarm
 
 #: A landing this close to a surface, in units of the float64 rounding of the scene's
 #: coordinates, is a contact: far above the rounding of the distance (a few units), far below
@@ -211,18 +211,6 @@ def simulate(scene: Scene, swarm: Swarm, t_end: float, times=None) -> ReferenceR
         steps[i] = flight.steps
     return ReferenceRun(times=times, position=position, velocity=velocity, events=events,
                         incomplete=incomplete, steps=steps, t_end=t_end)
-
-
-def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, seed: int = 0,
-            **options):
-    """The error report of a run against this reference (see :mod:`warpsim.error_report`).
-
-    Returns:
-        :class:`warpsim.error_report.ErrorReport` (``summary()`` text, ``to_dict()``).
-    """
-    from .error_report import compare as _compare
-
-    return _compare(sim_or_trajectory, scene, swarm, sample=sample, seed=seed, **options)
 
 
 # -- internals ---------------------------------------------------------------------------------

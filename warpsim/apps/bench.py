@@ -146,9 +146,9 @@ def measure(scene_name: str, count: int | None = None, frames: int | None = None
     Raises:
         ValueError: a bad scene, option or device, in one line.
     """
-    from . import __version__
-    from .scene import Scene
-    from .simulator import Simulator
+    from .. import __version__
+    from ..scene import Scene
+    from ..simulator import Simulator
 
     scene = Scene.load(scene_name)
     frames = scene.frames if frames is None else frames
@@ -215,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``warpsim bench``; returns the exit code (0, 1 on an error, 2 on bad
     usage), errors in one line on standard error."""
     args = build_parser().parse_args(argv)
-    from .cli import init_warp
+    from .startup import init_warp
 
     init_warp(debug=False)  # without Warp's start-up lines (a machine without CUDA has some)
     try:
