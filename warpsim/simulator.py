@@ -12,6 +12,7 @@ import numpy as np
 import warp as wp
 
 from . import broad_phase as broad
+from . import feasibility
 from . import validation as check
 from .device import resolve_device
 from .kernels import precision as fp
@@ -147,10 +148,10 @@ class Simulator:
                                   else check.flag("energy_correction", energy_correction))
         """Whether the speed is reset from the energy after each frame."""
         # everything a run needs, checked before anything is uploaded or compiled
-        self.warnings = check.check_run(scene, swarm, self.dt, self.precision,
+        self.warnings = feasibility.check_run(scene, swarm, self.dt, self.precision,
                                         self.max_bounces)
-        """Texts of the :class:`warpsim.validation.PrecisionWarning` s this set-up raised."""
-        check.check_outside(scene.boxes, swarm.position, swarm.radius, self.precision)
+        """Texts of the :class:`warpsim.PrecisionWarning` s this set-up raised."""
+        feasibility.check_outside(scene.boxes, swarm.position, swarm.radius, self.precision)
         reach = broad.reach(swarm.position, swarm.velocity, swarm.radius, scene.gravity, self.dt)
         dtype = fp.precision(self.precision).np_dtype
         self.broad_phase, self._grid = broad.choose(broad_phase, scene.boxes, reach, dtype)

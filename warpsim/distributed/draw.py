@@ -8,7 +8,7 @@ same spheres as a one-process run of the whole swarm: :func:`sharded_spawn` (all
 :func:`shard_swarm` (some blocks) are the one draw both paths use, and the composed result is
 bit-identical whatever the number of workers or shards. Every block is checked clear of the
 obstacles, per sphere (the emitter's rejection sampling, then
-:func:`warpsim.validation.check_outside`), exactly as :meth:`warpsim.Scene.spawn` checks it.
+:func:`warpsim.feasibility.check_outside`), exactly as :meth:`warpsim.Scene.spawn` checks it.
 It is **not** the draw of ``scene.spawn(n, seed)`` (one stream for the whole swarm): a single
 stream cannot be split among workers without drawing all of it, so the sharded draw is its own
 (equally valid) sample; ``warpsim run`` without ``--dask`` keeps ``scene.spawn``. Changing
