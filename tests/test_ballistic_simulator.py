@@ -1,4 +1,4 @@
-"""The ballistic model through the Simulator, against the exact reference (``warpsim.reference``)
+"""The ballistic model through the Simulator, against the exact reference (``warpsim.analysis.reference``)
 and analytic answers: its error does not depend on the step size.
 """
 

@@ -1,4 +1,4 @@
-"""``warpsim bench``: the throughput measure of one scene, through ``warpsim.bench.main`` and the
+"""``warpsim bench``: the throughput measure of one scene, through ``warpsim.apps.bench.main`` and the
 console script. Figures are checked for consistency and against an analytic bounce count, never
 for speed."""
 

@@ -1,4 +1,4 @@
-"""The exact reference (``warpsim.reference``) against analytic answers.
+"""The exact reference (``warpsim.analysis.reference``) against analytic answers.
 
 Every expected value here comes from closed-form physics (free fall, mirror images, contact
 points built backwards from a chosen contact), never from the code under test.

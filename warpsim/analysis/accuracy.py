@@ -1,7 +1,7 @@
 """The speed-against-error study of one scene: ``warpsim accuracy SCENE``.
 
 Every setting simulates the same swarm for the same simulated time and is measured against the
-exact reference (:mod:`warpsim.reference`) with :func:`warpsim.error_report.measure`. The
+exact reference (:mod:`warpsim.analysis.reference`) with :func:`warpsim.analysis.error_report.measure`. The
 settings come in families, one curve each:
 
 - ``linear float32`` / ``linear float64``: the step ``dt`` from 1/30 s to 1/960 s;

@@ -1,4 +1,4 @@
-"""The error report: a run measured against the exact reference (:mod:`warpsim.reference`).
+"""The error report: a run measured against the exact reference (:mod:`warpsim.analysis.reference`).
 
 In a room full of plates, trajectories diverge exponentially from any perturbation, so a
 position error after ten seconds says nothing about a simulator. The report gives measures
