@@ -1,6 +1,6 @@
-"""``warpsim bench``: the throughput measure of one scene, through ``warpsim.apps.bench.main`` and the
-console script. Figures are checked for consistency and against an analytic bounce count, never
-for speed."""
+"""``warpsim bench``: the throughput measure of one scene, through ``warpsim.apps.bench.main``
+and the console script. Figures are checked for consistency and against an analytic bounce
+count, never for speed."""
 
 import inspect
 import json

@@ -239,39 +239,29 @@ def test_preview_movie(tmp_path, capsys):
 
 
 def test_velocities_and_events_options(tmp_path, capsys):
-    """Motion data and contact events, where this simulator records them."""
-    import inspect
-
-    params = inspect.signature(ws.Simulator.run).parameters
+    """Motion data and contact events: the file holds the simulator's own values."""
     usd = tmp_path / "w.usdc"
-    if "velocities" in params:
-        code, out, err = cli(capsys, "run", "wedge", "-n", 6, "--frames", 5, "--seed", 3,
-                             "-o", usd, "--velocities", "--no-progress")
-        assert code == 0, err
-        traj = ws.export.read_usd(usd)
-        scene = ws.Scene.load("wedge")
-        expected = ws.Simulator(scene, scene.spawn(n=6, seed=3)).run(5, velocities=True)
-        # the file holds the simulator's velocities at each recorded frame, to the float32 bit
-        np.testing.assert_array_equal(traj.velocity, expected.velocity.astype(np.float32))
-        np.testing.assert_allclose(traj.angular_velocity, expected.angular_velocity,
-                                   rtol=1e-6, atol=1e-30)
-    else:
-        code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--velocities")
-        assert code != 0 and "does not record velocities" in one_error_line(err)
-    if "events" in params:
-        pytest.importorskip("pyarrow")
-        events = tmp_path / "hits.parquet"
-        code, out, err = cli(capsys, "run", "wedge", "-n", 6, "--frames", 5, "-o", usd,
-                             "--events", events, "--no-progress")
-        assert code == 0, err
-        assert len(ws.events.ContactEvents.read_parquet(events)) > 0
-    else:
-        code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--events",
-                           tmp_path / "hits.parquet")
-        assert code != 0 and "does not record contact events" in one_error_line(err)
+    code, out, err = cli(capsys, "run", "wedge", "-n", 6, "--frames", 5, "--seed", 3,
+                         "-o", usd, "--velocities", "--no-progress")
+    assert code == 0, err
+    traj = ws.export.read_usd(usd)
+    scene = ws.Scene.load("wedge")
+    expected = ws.Simulator(scene, scene.spawn(n=6, seed=3)).run(5, velocities=True)
+    # the file holds the simulator's velocities at each recorded frame, to the float32 bit
+    np.testing.assert_array_equal(traj.velocity, expected.velocity.astype(np.float32))
+    np.testing.assert_allclose(traj.angular_velocity, expected.angular_velocity,
+                               rtol=1e-6, atol=1e-30)
     code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--events", tmp_path / "hits.csv")
     assert code != 0 and ".parquet" in one_error_line(err)
-    assert "hits.parquet" not in [p.name for p in tmp_path.iterdir()] or "events" in params
+    assert "hits.parquet" not in [p.name for p in tmp_path.iterdir()]
+    code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--events-capacity", 8)
+    assert code != 0 and "--events-capacity needs --events" in one_error_line(err)
+    pytest.importorskip("pyarrow")
+    events = tmp_path / "hits.parquet"
+    code, out, err = cli(capsys, "run", "wedge", "-n", 6, "--frames", 5, "-o", usd,
+                         "--events", events, "--no-progress")
+    assert code == 0, err
+    assert len(ws.ContactEvents.read_parquet(events)) > 0
 
 
 def test_warp_start_up_chatter_is_silenced_and_bad_device_is_one_line(tmp_path):

@@ -56,7 +56,7 @@ def test_floor_bounce_contact_time_and_error_figures():
         swarm, error_report.initial_velocity(swarm, dt, scene.gravity, "linear")), 1.0)
     u0 = 0.5 * G * dt
     t_hit = (-u0 + np.sqrt(u0 ** 2 + 2 * G * h)) / G
-    assert abs(ref.events[0].time[0] - t_hit) < 1e-12
+    assert abs(ref.events.of_sphere(0).time[0] - t_hit) < 1e-12
     assert c["time_error_max_s"] < dt
     assert c["position_error_max_m"] < G * t_hit * dt
     assert set(rep.position_error) == {"0.1 s", "0.5 s", "1 s"}
@@ -112,9 +112,11 @@ def test_contacts_from_frames_of_a_linear_bounce():
     vel = [v, v, v_out, v_out]
     found = error_report.contacts_from_frames(np.array(frames)[:, None], np.array(vel)[:, None],
                                               dt, g, "linear")
-    np.testing.assert_allclose(found.time[0], [dt + tau], atol=1e-12)
-    np.testing.assert_allclose(found.normal[0], [[0.0, 1.0, 0.0]], atol=1e-12)
-    np.testing.assert_allclose(found.position[0], [contact], atol=1e-12)
+    np.testing.assert_allclose(found.time, [dt + tau], atol=1e-12)
+    np.testing.assert_allclose(found.normal, [[0.0, 1.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(found.position, [contact], atol=1e-12)
+    assert found.frame.tolist() == [2] and found.sphere.tolist() == [0]
+    np.testing.assert_allclose(found.fraction, [tau / dt], atol=1e-12)
 
 
 def test_bad_arguments():

@@ -16,21 +16,24 @@ frames, seeds, the bounce cap) must be below ``2**31``: the kernels count in 32-
 The checks of a whole run rather than one field (what the chosen precision holds, no sphere
 inside an obstacle) are :mod:`warpsim.feasibility`.
 
-This module imports nothing else from warpsim: every other module may import it.
+This module imports nothing else from warpsim but its vocabulary: every other module may
+import it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import numbers
 from collections.abc import Mapping, Sequence
+from enum import StrEnum
 
 import numpy as np
 
+from .vocabulary import BroadPhase, Motion
+
 PRECISIONS = ("float32", "float64")
-BROAD_PHASES = ("auto", "bvh", "brute", "grid")
-MOTIONS = ("linear", "ballistic")
 DTYPES = {"float32": np.float32, "float64": np.float64}
 
 INT_LIMIT = 2**31
@@ -365,11 +368,19 @@ def float_dtype(name: str) -> np.dtype:
     return np.dtype(DTYPES[precision(name)])
 
 
-def motion(value: str, name: str = "motion") -> str:
-    """``"linear"`` (the sheet's chord per frame) or ``"ballistic"`` (the exact parabola)."""
-    if not isinstance(value, str) or value not in MOTIONS:
-        raise ValueError(f"{name} must be one of {MOTIONS}, got {_short(value)}")
-    return value
+def _member(enum: type[StrEnum], name: str, value) -> StrEnum:
+    """The member of a string enum named by ``value`` (a member or its string value)."""
+    if isinstance(value, str):
+        with contextlib.suppress(ValueError):
+            return enum(value)
+    choices = tuple(m.value for m in enum)
+    raise ValueError(f"{name} must be one of {choices}, got {_short(value)}")
+
+
+def motion(value, name: str = "motion") -> Motion:
+    """A :class:`~warpsim.vocabulary.Motion`: ``"linear"`` (the chord of each frame) or
+    ``"ballistic"`` (the exact parabola)."""
+    return _member(Motion, name, value)
 
 
 def optional_flag(name: str, value) -> bool | None:
@@ -377,11 +388,10 @@ def optional_flag(name: str, value) -> bool | None:
     return None if value is None else flag(name, value)
 
 
-def broad_phase(value: str) -> str:
-    """``"auto"``, ``"bvh"``, ``"brute"`` or ``"grid"``."""
-    if not isinstance(value, str) or value not in BROAD_PHASES:
-        raise ValueError(f"broad_phase must be one of {BROAD_PHASES}, got {_short(value)}")
-    return value
+def broad_phase(value) -> BroadPhase:
+    """A :class:`~warpsim.vocabulary.BroadPhase`: ``"auto"``, ``"brute"``, ``"bvh"`` or
+    ``"grid"`` (booleans and other types refused)."""
+    return _member(BroadPhase, "broad_phase", value)
 
 
 # --- the fields of the classes, shared with the scene files ----------------------------------

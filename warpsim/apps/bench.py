@@ -16,7 +16,6 @@ scripts in the repository's ``benchmarks/`` folder, not part of the package: see
 from __future__ import annotations
 
 import argparse
-import inspect
 import json
 import os
 import platform
@@ -28,12 +27,15 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
+from ..validation import PRECISIONS
+from ..vocabulary import BroadPhase, Motion
+
+BROAD_PHASES = tuple(BroadPhase)
+MOTIONS = tuple(Motion)
+
 PROG = "warpsim bench"
 DESCRIPTION = ("The throughput of one scene on this machine: kernel build timed apart, one "
                "warm-up frame, then sphere-frames per second over the timed frames.")
-PRECISIONS = ("float32", "float64")
-BROAD_PHASES = ("auto", "brute", "bvh", "grid")
-MOTIONS = ("linear", "ballistic")
 EXIT_ERROR = 1
 EXIT_USAGE = 2
 
@@ -152,11 +154,7 @@ def measure(scene_name: str, count: int | None = None, frames: int | None = None
 
     scene = Scene.load(scene_name)
     frames = scene.frames if frames is None else frames
-    extra = {}
-    if motion is not None:
-        if "motion" not in inspect.signature(Simulator).parameters:
-            raise ValueError("--motion needs a warpsim whose Simulator takes motion=")
-        extra["motion"] = motion
+    extra = {} if motion is None else {"motion": motion}
     start = time.perf_counter()
     swarm = scene.spawn(n=count)
     sim = Simulator(scene, swarm, device=device, precision=precision, workers=workers,
@@ -179,7 +177,7 @@ def measure(scene_name: str, count: int | None = None, frames: int | None = None
         "scene": scene.name, "source": scene.source, "boxes": len(scene.boxes), "n": n,
         "frames": frames, "dt": sim.dt, "precision": sim.precision,
         "max_bounces": sim.max_bounces, "broad_phase": sim.broad_phase, "workers": sim.workers,
-        "motion": getattr(sim, "motion", motion), "setup_s": setup_s, "build_s": build_s,
+        "motion": sim.motion, "setup_s": setup_s, "build_s": build_s,
         "build_cached": (not built) if sim.device.is_cpu else None, "warmup_s": warmup_s,
         "seconds": seconds, "sphere_frames_per_s": sphere_frames / seconds,
         "ns_per_sphere_frame": seconds / sphere_frames * 1e9,

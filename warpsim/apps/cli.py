@@ -10,12 +10,13 @@ paths can be written, the optional packages are there, the file will not be too 
 from __future__ import annotations
 
 import argparse
-import inspect
 import os
 import sys
 
 import numpy as np
 
+from ..validation import PRECISIONS
+from ..vocabulary import BroadPhase, Motion
 from .startup import check_device, init_warp
 
 EXIT_ERROR = 1
@@ -101,10 +102,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=int, help="emitter seed (default: the scene's)")
     run.add_argument("--max-bounces", type=int, help="contacts per sphere per frame")
     run.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's)")
-    run.add_argument("--precision", default="float32", choices=("float32", "float64"))
-    run.add_argument("--broad-phase", default="auto", choices=("auto", "bvh", "brute"),
-                     help="candidate boxes per sphere: a BVH or all boxes (same results)")
-    run.add_argument("--motion", choices=("linear", "ballistic"),
+    run.add_argument("--precision", default="float32", choices=PRECISIONS)
+    run.add_argument("--broad-phase", default=BroadPhase.AUTO, choices=tuple(BroadPhase),
+                     help="candidate boxes per sphere: every box, a BVH or a grid, or chosen "
+                          "from a cost model (same results)")
+    run.add_argument("--motion", choices=tuple(Motion),
                      help="path within a frame: the chord or the exact parabola")
     run.add_argument("--workers", type=int, help="CPU threads stepping the swarm")
     run.add_argument("-o", "--output", help="output .usdc or .usda (default: SCENE.usdc)")
@@ -196,55 +198,27 @@ def energy_line(sim, state) -> str:
     return f"energy drift: {drift:.2e} (largest per sphere, relative)"
 
 
-def _accepts(function, name: str) -> bool:
-    try:
-        return name in inspect.signature(function).parameters
-    except (TypeError, ValueError):
-        return False
-
-
 def _run_options(args) -> dict:
-    """Keywords of ``Simulator.run`` asked for on the command line, checked to be supported by
-    this simulator before anything runs."""
-    import warpsim as ws
+    """Keywords of :meth:`warpsim.Simulator.run` asked for on the command line, checked before
+    anything runs."""
+    from .. import validation as check
 
     options = {}
     if args.velocities:
-        if not _accepts(ws.Simulator.run, "velocities"):
-            raise ValueError("--velocities: this simulator does not record velocities yet")
         options["velocities"] = True
     if args.events is not None:
-        if not _accepts(ws.Simulator.run, "events"):
-            raise ValueError("--events: this simulator does not record contact events yet")
         options["events"] = True
     if args.events_capacity is not None:
-        from .. import validation as check
-
         if args.events is None:
             raise ValueError("--events-capacity needs --events")
-        check.positive_int("events_capacity", args.events_capacity)
-        name = next((k for k in ("event_capacity", "events_capacity")
-                     if _accepts(ws.Simulator.run, k)), None)
-        if name is None:
-            raise ValueError("--events-capacity: this simulator has no event capacity option")
-        options[name] = args.events_capacity
+        options["event_capacity"] = check.positive_int("events_capacity", args.events_capacity)
     return options
 
 
 def _simulator_options(args) -> dict:
-    """``motion`` and ``workers`` for :class:`warpsim.Simulator`, only when given (checked to
-    be supported before anything runs)."""
-    import warpsim as ws
-
-    options = {}
-    for name in ("motion", "workers"):
-        value = getattr(args, name)
-        if value is None:
-            continue
-        if not _accepts(ws.Simulator.__init__, name):
-            raise ValueError(f"--{name}: this simulator has no {name} option yet")
-        options[name] = value
-    return options
+    """``motion`` and ``workers`` for :class:`warpsim.Simulator`, only when given."""
+    return {name: getattr(args, name) for name in ("motion", "workers")
+            if getattr(args, name) is not None}
 
 
 def _frame_range(args, scene_frames: int) -> tuple[int, int]:
@@ -408,16 +382,9 @@ def _cmd_preview(args) -> int:
 
 
 def _cmd_bench(argv: list[str]) -> int:
-    from . import bench as benchmark
+    from . import bench
 
-    if _accepts(benchmark.main, "prog"):
-        return benchmark.main(argv, prog="warpsim bench") or 0
-    saved = sys.argv[0]
-    sys.argv[0] = "warpsim bench"  # argparse's default prog
-    try:
-        return benchmark.main(argv) or 0
-    finally:
-        sys.argv[0] = saved
+    return bench.main(argv) or 0
 
 
 def _cmd_accuracy(argv: list[str]) -> int:
