@@ -24,6 +24,17 @@ def temporary_sibling(path: Path) -> Path:
     raise FileExistsError(f"no free temporary name next to {str(path)!r}")
 
 
+def default_name(name: str, suffix: str, fallback: str = "scene") -> str:
+    """A file name in the working folder for a default output: ``name`` with every character
+    but letters, digits, ``-``, ``_`` and inner dots replaced by ``_``, no leading dots, so
+    that a scene named ``"../escaped"`` writes ``escaped.usdc`` here, never outside;
+    ``fallback`` when nothing is left. ``suffix`` is appended (``".usdc"``)."""
+    stem = "".join(c if (c.isalnum() and c.isascii()) or c in "-_." else "_"
+                   for c in str(name).replace("\\", "/").split("/")[-1])
+    stem = stem.strip("._ ")
+    return f"{stem or fallback}{suffix}"
+
+
 def check_writable(path, suffixes: tuple[str, ...] | None = None, what: str = "output") -> Path:
     """Check that a file can be written at ``path``, before the work that produces it starts.
 

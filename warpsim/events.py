@@ -26,6 +26,7 @@ _DTYPES = {"time": np.float64, "sphere": np.int64, "box": np.int32, "position": 
 _FRAME_DTYPES = {"frame": np.int64, "fraction": np.float64}  # simulated runs only
 _VECTORS = ("position", "normal")
 DROPPED_KEY = b"warpsim:dropped"  # Parquet key-value metadata holding ContactEvents.dropped
+SETTING_PREFIX = "warpsim:"  # the run's settings: "warpsim:dt", "warpsim:precision", ...
 SUFFIX = ".parquet"
 
 
@@ -76,6 +77,8 @@ class ContactEvents:
             float64; None with ``frame``.
         dropped: contacts that happened but were not recorded because the event buffer was
             full (its capacity is an option of the run); 0 means the table is complete.
+        settings: the run's settings as text (``dt``, ``precision``, ``motion``, ``scene``,
+            ...), stored in and read from an events file's metadata; empty when unknown.
 
     Raises:
         ValueError: columns of different lengths or wrong shapes, or a bad value, naming the
@@ -92,6 +95,7 @@ class ContactEvents:
     frame: np.ndarray | None = None
     fraction: np.ndarray | None = None
     dropped: int = field(default=0)
+    settings: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if (self.frame is None) != (self.fraction is None):
@@ -108,7 +112,10 @@ class ContactEvents:
             n = values.shape[0] if n is None else n
             if values.shape[0] != n:
                 raise ValueError(f"{name} has {values.shape[0]} rows, time has {n}")
-            setattr(self, name, np.array(values, dtype=dtype, copy=True))
+            values = np.array(values, dtype=dtype, copy=True)
+            if values.dtype.kind == "f":
+                values += 0.0  # -0. (a contact at a frame's start) reads as 0
+            setattr(self, name, values)
         bounce = self.kind == ContactKind.BOUNCE
         checks = [("time", ~(self.time >= 0.0), ">= 0"), ("box", self.box < -1, ">= -1"),
                   ("kind", ~np.isin(self.kind, list(ContactKind)),
@@ -125,6 +132,7 @@ class ContactEvents:
                 or self.dropped < 0:
             raise ValueError(f"dropped must be an integer >= 0, got {self.dropped!r}")
         self.dropped = int(self.dropped)
+        self.settings = _settings(self.settings)
 
     @classmethod
     def of_frames(cls, dt: float, frame, fraction, **columns) -> ContactEvents:
@@ -151,12 +159,13 @@ class ContactEvents:
             return cls.empty(frames=False)
         names = [n for n in (*_DTYPES, *_FRAME_DTYPES) if getattr(tables[0], n) is not None]
         return cls(**{n: np.concatenate([getattr(t, n) for t in tables]) for n in names},
-                   dropped=sum(t.dropped for t in tables))
+                   dropped=sum(t.dropped for t in tables), settings=tables[0].settings)
 
     def select(self, rows) -> ContactEvents:
         """The rows picked by a boolean mask or an index array (``dropped`` kept)."""
         names = [n for n in (*_DTYPES, *_FRAME_DTYPES) if getattr(self, n) is not None]
-        return type(self)(**{n: getattr(self, n)[rows] for n in names}, dropped=self.dropped)
+        return type(self)(**{n: getattr(self, n)[rows] for n in names}, dropped=self.dropped,
+                          settings=self.settings)
 
     def of_sphere(self, sphere: int) -> ContactEvents:
         """The contacts of one sphere, in their order."""
@@ -200,18 +209,22 @@ class ContactEvents:
                                       ) from None
         df = pd.DataFrame(self.columns())
         df.attrs["dropped"] = self.dropped
+        df.attrs["settings"] = dict(self.settings)
         return df
 
-    def write_parquet(self, path) -> Path:
+    def write_parquet(self, path, settings: dict | None = None) -> Path:
         """Write the table to a Parquet file, atomically (a temporary name, then a rename).
 
         Columns: ``frame``, ``fraction`` (simulated runs), ``time`` [s], ``sphere``, ``box``,
         ``position_x/y/z`` [m], ``normal_x/y/z``, ``normal_speed`` [m/s], ``kind`` (0 bounce,
-        1 support: :class:`warpsim.ContactKind`); ``dropped`` is stored in the file's key-value
-        metadata (``warpsim:dropped``).
+        1 support: :class:`warpsim.ContactKind`); ``dropped`` and the run's settings are stored
+        in the file's key-value metadata (``warpsim:dropped``, ``warpsim:dt``, ...), which
+        :meth:`read_parquet` reads back into :attr:`dropped` and :attr:`settings`.
 
         Args:
             path: output file ending in ``.parquet``; its folder must exist.
+            settings: the run's settings to store (name -> text or number), added to
+                :attr:`settings`; e.g. ``{"dt": 1/60, "precision": "float32"}``.
 
         Returns:
             ``path`` as a :class:`pathlib.Path`.
@@ -228,7 +241,10 @@ class ContactEvents:
             raise FileNotFoundError(f"folder of {str(path)!r} does not exist")
         pa, pq = _pyarrow()
         table = pa.table(self.columns())
-        table = table.replace_schema_metadata({DROPPED_KEY: str(self.dropped).encode()})
+        stored = {**self.settings, **_settings(settings or {})}
+        meta = {f"{SETTING_PREFIX}{k}".encode(): v.encode() for k, v in stored.items()}
+        meta[DROPPED_KEY] = str(self.dropped).encode()
+        table = table.replace_schema_metadata(meta)
         from .export.files import atomic_output  # the one atomic writer (standard library)
 
         with atomic_output(path) as tmp:
@@ -262,7 +278,25 @@ class ContactEvents:
             else:
                 fields[name] = cols.get(name)
         meta = table.schema.metadata or {}
-        return cls(**fields, dropped=int(meta.get(DROPPED_KEY, b"0")))
+        settings = {k.decode()[len(SETTING_PREFIX):]: v.decode() for k, v in meta.items()
+                    if k.startswith(SETTING_PREFIX.encode()) and k != DROPPED_KEY}
+        return cls(**fields, dropped=int(meta.get(DROPPED_KEY, b"0")), settings=settings)
+
+
+def _settings(settings) -> dict[str, str]:
+    """Settings as text keyed by name (numbers by ``repr``, exact for floats)."""
+    if not isinstance(settings, dict):
+        raise ValueError(f"settings must be a dict of name -> value, got "
+                         f"{type(settings).__name__}")
+    out = {}
+    for key, value in settings.items():
+        if not isinstance(key, str) or not key or key == "dropped":
+            raise ValueError(f"settings key {key!r} must be a non-empty string other than "
+                             f"'dropped'")
+        if isinstance(value, bool) or not isinstance(value, (str, int, float)):
+            raise ValueError(f"settings[{key!r}] must be text or a number, got {value!r}")
+        out[key] = value if isinstance(value, str) else repr(value)
+    return out
 
 
 __all__ = ["ContactEvents", "require_parquet"]

@@ -31,9 +31,12 @@ from .obstacles import IDENTITY_QUAT, RoundedBoxes
 BUNDLED_PACKAGE = "warpsim.scenes"
 SUFFIX = ".toml"
 
-MAX_GRID_BOXES = 100_000
-"""Largest ``[[box_grid]]`` expansion accepted: far above any sensible scene, it turns a typo
-such as ``count = [1000, 1000, 1]`` into an error instead of an out-of-memory."""
+MAX_BOXES = 100_000
+"""Most boxes a scene file may make, every ``[[box]]`` and every ``[[box_grid]]`` together:
+far above any sensible scene, it turns a typo such as ``count = [1000, 1000, 1]`` (or two
+grids of 60 000) into an error, checked before a grid is expanded, instead of an
+out-of-memory."""
+MAX_GRID_BOXES = MAX_BOXES  # the former name
 
 TOP_KEYS = ("name", "description", "simulation", "physics", "box", "box_grid", "emitter")
 SIMULATION_KEYS = ("dt", "frames", "max_bounces", "motion")
@@ -170,6 +173,9 @@ def _scene_arguments(data: dict, *, stem: str, source: str) -> dict:
     """The keyword arguments of :class:`warpsim.Scene`, every value checked, from parsed TOML."""
     _known_keys(data, TOP_KEYS, TOP_LEVEL)
     name = _string(data, "name", stem)
+    if not name.strip() or "\n" in name:
+        raise ValueError(f"name must be a non-empty single line, got {name!r} (leave it out to "
+                         f"use the file name, {stem!r})")
     description = _string(data, "description", "")
     if "\n" in description:
         raise ValueError("description must be a single line")
@@ -193,8 +199,12 @@ def _boxes(data: dict) -> RoundedBoxes:
         _known_keys(table, BOX_KEYS, where)
         center, half, rotation, radius = _shape(table, where, _require(table, where, "center"))
         parts.append((center[None], half[None], rotation[None], np.array([radius])))
+    total = len(parts)
+    if total > MAX_BOXES:
+        raise ValueError(f"{total} [[box]] tables, more than {MAX_BOXES} boxes in the scene")
     for i, table in enumerate(_array_of_tables(data, "box_grid")):
-        parts.append(_grid(table, f"box_grid[{i}]"))
+        parts.append(_grid(table, f"box_grid[{i}]", made=total))
+        total += len(parts[-1][3])
     if not parts:
         raise ValueError("no obstacles: add at least one [[box]] or [[box_grid]] table")
     center, half, rotation, radius = (np.concatenate(column) for column in zip(*parts,
@@ -215,17 +225,20 @@ def _shape(table: dict, where: str, center) -> tuple[np.ndarray, np.ndarray, np.
                              table.get("radius", 0.0), where=f"{where}.")
 
 
-def _grid(table: dict, where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The boxes of one ``[[box_grid]]``, x index fastest, then y, then z."""
+def _grid(table: dict, where: str, made: int = 0,
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The boxes of one ``[[box_grid]]``, x index fastest, then y, then z; ``made`` boxes come
+    before it (the scene's total is checked against :data:`MAX_BOXES` before expanding)."""
     _known_keys(table, BOX_GRID_KEYS, where)
     origin = check.vec3(f"{where}.origin", _require(table, where, "origin"))
     counts = _require(table, where, "count")
     if not isinstance(counts, list) or len(counts) != 3:
         raise ValueError(f"{where}.count must be [nx, ny, nz], got {counts!r}")
     nx, ny, nz = (check.positive_int(f"{where}.count[{a}]", c) for a, c in enumerate(counts))
-    if nx * ny * nz > MAX_GRID_BOXES:
-        raise ValueError(f"{where}.count {counts} makes {nx * ny * nz} boxes, more than "
-                         f"{MAX_GRID_BOXES}")
+    if made + nx * ny * nz > MAX_BOXES:
+        before = f" after the {made} before it" if made else ""
+        raise ValueError(f"{where}.count {counts} makes {nx * ny * nz} boxes{before}, more than "
+                         f"{MAX_BOXES} in the scene")
     spacing = check.vec3(f"{where}.spacing", _require(table, where, "spacing"))
     stagger = check.vec3(f"{where}.stagger", table.get("stagger", (0.0, 0.0, 0.0)))
     axis = table.get("stagger_axis", "y")

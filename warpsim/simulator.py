@@ -383,7 +383,17 @@ class Simulator:
                           dt=self.dt, position=position, orientation=orientation,
                           radius=self._radius_host.copy(), velocity=velocity,
                           angular_velocity=angular,
-                          events=_contact_events(gathered, dropped, self.dt) if events else None)
+                          events=(_contact_events(gathered, dropped, self.dt, self.settings())
+                                  if events else None))
+
+    def settings(self) -> dict[str, str]:
+        """The run's settings as text (what an events file stores with its rows): ``scene``,
+        ``dt`` [s], ``precision``, ``motion``, ``max_bounces``, ``broad_phase``,
+        ``energy_correction``."""
+        return {"scene": self.scene.name, "dt": repr(float(self.dt)),
+                "precision": self.precision, "motion": str(self.motion),
+                "max_bounces": str(self.max_bounces), "broad_phase": str(self.broad_phase),
+                "energy_correction": str(bool(self.energy_correction)).lower()}
 
     def _motion_now(self) -> tuple[np.ndarray, np.ndarray]:
         """True velocity [m/s] and world angular velocity [rad/s] of the current state."""
@@ -483,19 +493,28 @@ def _read_events(buffer: dict, frame_base: int) -> tuple[dict, int]:
     return columns, count - rows
 
 
-def _contact_events(parts: list[dict], dropped: int, dt: float):
+def _contact_events(parts: list[dict], dropped: int, dt: float, settings: dict):
     """One :class:`warpsim.ContactEvents` from the launches' rows, ordered by frame, then
     sphere, then the order the contacts happened in (a stable sort keeps it: one thread writes a
     sphere's contacts in sequence)."""
     from .events import ContactEvents
+    from .vocabulary import ContactKind
 
     if not parts:
-        return ContactEvents.empty(dropped=dropped)
+        empty = ContactEvents.empty(dropped=dropped)
+        empty.settings = dict(settings)
+        return empty
     merged = {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
     order = np.lexsort((merged["sphere"], merged["frame"]))
     merged = {key: value[order] for key, value in merged.items()}
     merged["box"] = merged["box"].astype(np.int32)
-    return ContactEvents.of_frames(dt, dropped=dropped, **merged)
+    merged["fraction"] = np.clip(merged["fraction"], 0.0, 1.0)
+    # a bounce moves into the surface: a speed rounding made negative (a resting contact's
+    # few nm/s) is zero; a support's speed keeps its sign (it may slide onto the surface)
+    bounce = merged["kind"] == ContactKind.BOUNCE
+    merged["normal_speed"] = np.where(bounce, np.maximum(merged["normal_speed"], 0.0),
+                                      merged["normal_speed"])
+    return ContactEvents.of_frames(dt, dropped=dropped, settings=settings, **merged)
 
 
 def _workers(workers, device, n: int) -> int:

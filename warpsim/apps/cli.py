@@ -16,7 +16,7 @@ import sys
 import numpy as np
 
 from ..validation import PRECISIONS
-from ..vocabulary import BroadPhase, Motion
+from ..vocabulary import BroadPhase, ContactKind, Motion
 from .startup import check_device, init_warp
 
 EXIT_ERROR = 1
@@ -104,12 +104,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's)")
     run.add_argument("--precision", default="float32", choices=PRECISIONS)
     run.add_argument("--broad-phase", default=BroadPhase.AUTO, choices=tuple(BroadPhase),
-                     help="candidate boxes per sphere: every box, a BVH or a grid, or chosen "
-                          "from a cost model (same results)")
+                     help="candidate boxes per sphere: every box (brute), a BVH (bvh), a "
+                          "uniform grid (grid), or chosen from a cost model (auto); the same "
+                          "results; the summary says which ran")
     run.add_argument("--motion", choices=tuple(Motion),
                      help="path within a frame: the chord or the exact parabola")
     run.add_argument("--workers", type=int, help="CPU threads stepping the swarm")
-    run.add_argument("-o", "--output", help="output .usdc or .usda (default: SCENE.usdc)")
+    run.add_argument("-o", "--output",
+                     help="output .usdc or .usda (default: the scene's name + .usdc, here)")
     run.add_argument("--every", type=int, default=1, help="record one frame in EVERY")
     run.add_argument("--velocities", action=argparse.BooleanOptionalAction,
                      default=VELOCITIES_DEFAULT,
@@ -245,6 +247,7 @@ def _run_sharded(args, scene):
         ValueError: an option a sharded run does not support, or a bad value (named).
     """
     from .. import distributed
+    from ..export.files import default_name
 
     for option, value in (("--spheres", args.spheres), ("--events", args.events),
                           ("--events-capacity", args.events_capacity),
@@ -257,7 +260,7 @@ def _run_sharded(args, scene):
     end = args.end if args.end is not None else args.frames
     if args.output is not None and not args.output.strip():
         raise ValueError("output path (-o) is empty")
-    output = args.output if args.output is not None else f"{scene.name}.usdc"
+    output = args.output if args.output is not None else default_name(scene.name, ".usdc")
     client = args.dask
     if client not in (None, distributed.LOCAL):
         client = distributed.scheduler_address(client)
@@ -281,7 +284,7 @@ def _cmd_run(args) -> int:
     import warpsim as ws
 
     from .. import validation as check
-    from ..export.files import check_writable
+    from ..export.files import check_writable, default_name
 
     scene = ws.Scene.load(args.scene)
     if args.dask is not None or args.shards is not None or args.block is not None:
@@ -292,8 +295,8 @@ def _cmd_run(args) -> int:
     every = check.positive_int("every", args.every)
     if args.output is not None and not args.output.strip():
         raise ValueError("output path (-o) is empty")
-    out = check_writable(args.output if args.output is not None else f"{scene.name}.usdc",
-                         USD_SUFFIXES)
+    out = check_writable(args.output if args.output is not None
+                         else default_name(scene.name, ".usdc"), USD_SUFFIXES)
     if args.events is not None:
         from ..events import require_parquet
 
@@ -329,28 +332,81 @@ def _cmd_run(args) -> int:
     traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
     state = sim.state()
     stats = sim.stats
-    path = export.write_usd(out, scene, traj, spheres=subset, velocities=args.velocities,
-                            warn=False)
     print(f"simulated {stats.frames} frames x {len(swarm)} spheres in {stats.seconds:.2f} s "
           f"(kernel build {build:.2f} s): "
           f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
-    print(f"bounces: {stats.bounces:,} ({stats.bounces / max(stats.sphere_frames, 1):.3f} per "
-          f"sphere-frame); capped: {stats.capped:,} sphere-frames, {stats.capped_spheres} spheres")
+    print(bounce_line(stats, traj.events))
     print(energy_line(sim, state))
-    print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {len(traj)} frames "
-          f"{int(traj.frame[0])}..{int(traj.frame[-1])}, {n_written} spheres)")
-    if args.events is not None:
+    print(f"broad phase: {describe_broad_phase(sim.broad_phase, args.broad_phase)}")
+
+    def write_scene():
+        path = export.write_usd(out, scene, traj, spheres=subset, velocities=args.velocities,
+                                warn=False)
+        print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {len(traj)} frames "
+              f"{int(traj.frame[0])}..{int(traj.frame[-1])}, {n_written} spheres)")
+
+    def write_events():
         events = traj.events
         events_path = events.write_parquet(args.events)
         lost = (f"; {events.dropped:,} dropped: the buffer was full, raise --events-capacity"
                 if events.dropped else "")
         print(f"wrote {events_path} ({len(events):,} contacts{lost})")
-    if args.error_sample is not None:
+
+    def compare():
         from ..analysis import error_report
 
         report = error_report.compare(sim, scene, swarm, sample=args.error_sample)
         print(report.summary())
-    return 0
+
+    # each output on its own: one that fails never loses the others (nor the run's figures)
+    outputs = [("USD file", write_scene)]
+    if args.events is not None:
+        outputs.append(("events file", write_events))
+    if args.error_sample is not None:
+        outputs.append(("error sample", compare))
+    return finish_outputs(outputs, args.debug_mode)
+
+
+def finish_outputs(outputs, debug: bool) -> int:
+    """Run each ``(what, write)`` of ``outputs`` in turn, whatever the others do; the failures
+    are reported together at the end, one line each, and make the exit code non-zero.
+    ``debug`` raises the first failure instead (its traceback)."""
+    failed = []
+    for what, write in outputs:
+        try:
+            write()
+        except Exception as exc:  # noqa: BLE001 - reported below, with the output it hit
+            if debug:
+                raise
+            failed.append(f"{what}: {exc}" if isinstance(exc, (ValueError, OSError,
+                                                               ImportError))
+                          else f"{what}: {type(exc).__name__}: {exc}")
+    for line in failed:
+        sys.stderr.write(f"warpsim: error: {line}\n")
+    return EXIT_ERROR if failed else 0
+
+
+def bounce_line(stats, events=None) -> str:
+    """The summary's contact line. The counters take bounces and resting (supporting)
+    contacts together; a complete contact table (``events``) tells them apart."""
+    per = stats.bounces / max(stats.sphere_frames, 1)
+    if events is not None and not events.dropped:
+        supports = int(np.count_nonzero(events.kind == ContactKind.SUPPORT))
+        kinds = f"{len(events) - supports:,} bounces, {supports:,} resting or sliding"
+    else:
+        kinds = "bounces and resting contacts together; --events counts them apart"
+    return (f"contacts: {stats.bounces:,} ({kinds}; {per:.3f} per sphere-frame); capped: "
+            f"{stats.capped:,} sphere-frames, {stats.capped_spheres} spheres")
+
+
+def describe_broad_phase(ran: str, requested: str) -> str:
+    """What broad phase ran, and why when it is not the one asked for."""
+    if requested in (BroadPhase.AUTO, ran):
+        return f"{ran}" + (" (chosen by the cost model)" if requested == BroadPhase.AUTO else "")
+    if requested == BroadPhase.GRID and ran == "grid-bvh":
+        return "grid, falling back to the BVH for paths that leave their cell"
+    return (f"{ran} ({requested} asked: no grid fits this scene at this precision, "
+            f"so every sphere uses the {ran})")
 
 
 def _cmd_preview(args) -> int:
