@@ -394,7 +394,9 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
     n = idx.size
     radius = np.asarray(trajectory.radius, dtype=np.float64)[idx]
     instancer.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.zeros(n, dtype=np.int32)))
-    instancer.CreateIdsAttr(Vt.Int64Array.FromNumpy(idx.astype(np.int64)))
+    ids = trajectory.ids() if hasattr(trajectory, "ids") else np.arange(
+        np.shape(trajectory.radius)[0], dtype=np.int64)
+    instancer.CreateIdsAttr(Vt.Int64Array.FromNumpy(ids[idx].astype(np.int64)))
     scales = np.repeat(radius.astype(np.float32)[:, None], 3, axis=1)
     instancer.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(scales))
     instancer.GetPrim().CreateAttribute("warpsim:radius", Sdf.ValueTypeNames.DoubleArray,
@@ -465,7 +467,8 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
         stride: keep every ``stride``-th recorded frame (rows 0, stride, 2 stride, ...) and the
             last one, as ``Simulator.run(every=...)`` does; >= 1.
         spheres: indices of the spheres to write (in that order, distinct), or None for all.
-            Their indices in the swarm are stored as the instancer's ``ids``.
+            Their indices in the swarm (``trajectory.sphere_ids``, for a trajectory of a
+            subset) are stored as the instancer's ``ids``.
         velocities: write ``velocities`` and ``angularVelocities`` (True), or not (False);
             None writes whichever the trajectory has.
         max_bytes: size above which a :class:`LargeOutputWarning` is emitted before writing

@@ -59,6 +59,11 @@ class Stats:
         capped: sphere-frames stopped by ``max_bounces``.
         capped_spheres: spheres stopped by the cap at least once.
         seconds: wall time spent in :meth:`Simulator.step` and :meth:`Simulator.run` [s].
+        broad_phase: the broad phase that ran (:attr:`Simulator.broad_phase`): a requested
+            ``"grid"`` reads ``"brute"`` or ``"bvh"`` where no grid fits (float64 far from the
+            origin, too many cells), ``"grid-bvh"`` where the grid falls back to the BVH.
+        requested_broad_phase: the one asked for (``"auto"``, ``"brute"``, ``"bvh"``,
+            ``"grid"``).
     """
 
     frames: int
@@ -67,6 +72,8 @@ class Stats:
     capped: int
     capped_spheres: int
     seconds: float
+    broad_phase: str = ""
+    requested_broad_phase: str = ""
 
     @property
     def sphere_frames_per_second(self) -> float:
@@ -80,8 +87,9 @@ class Stats:
 #: sphere-frame, with 2**24 16 frames and 36 ns.
 LAUNCH_SPHERE_FRAMES = 1 << 24
 
-#: Event rows per shard and launch by default (about 48 MB of float32 buffer): room for every
-#: contact of the bundled scenes' default runs; more are counted as dropped, never lost silently.
+#: Contact rows a run keeps by default (the earliest by frame, then sphere; about 0.1 GB on the
+#: host): room for every contact of the bundled scenes' default runs; more are counted as
+#: dropped, never lost silently. The device buffers hold what a launch can produce, at most this.
 DEFAULT_EVENT_CAPACITY = 1 << 20
 
 #: Shards smaller than this many spheres are not worth a thread of their own: below it the
@@ -154,6 +162,8 @@ class Simulator:
         feasibility.check_outside(scene.boxes, swarm.position, swarm.radius, self.precision)
         reach = broad.reach(swarm.position, swarm.velocity, swarm.radius, scene.gravity, self.dt)
         dtype = fp.precision(self.precision).np_dtype
+        self.requested_broad_phase = str(check.broad_phase(broad_phase))
+        """The broad phase asked for; :attr:`broad_phase` is the one that runs."""
         self.broad_phase, self._grid = broad.choose(broad_phase, scene.boxes, reach, dtype)
         self.device = resolve_device(device)
         self.workers = _workers(workers, self.device, len(swarm))
@@ -304,7 +314,7 @@ class Simulator:
 
     def run(self, frames: int, every: int = 1, progress: bool = False,
             velocities: bool = False, events: bool = False,
-            event_capacity: int = DEFAULT_EVENT_CAPACITY) -> Trajectory:
+            event_capacity: int = DEFAULT_EVENT_CAPACITY, spheres=None) -> Trajectory:
         """Advance ``frames`` frames, recording the current state and every ``every``-th frame.
 
         The kernel writes the recorded frames itself; one launch covers many of them.
@@ -320,8 +330,14 @@ class Simulator:
                 :class:`warpsim.ContactEvents`), written by the kernel into a bounded
                 buffer per shard and copied out after each launch. The results are the same
                 bits with or without.
-            event_capacity: rows of that buffer per shard and launch; contacts beyond it are
-                counted in ``ContactEvents.dropped``, never lost silently.
+            event_capacity: most contact rows the run keeps: the earliest ``event_capacity``
+                by frame, then sphere (a sphere's contacts in a frame in their order), the
+                same rows whatever the workers and launches; the others are counted in
+                ``ContactEvents.dropped``, never lost silently.
+            spheres: indices of the spheres whose frames are kept (distinct, any order), or
+                None for all: the trajectory then holds only those (its ``sphere_ids``), so
+                a run that writes a few spheres of a large swarm keeps a few in memory. Every
+                sphere is still simulated; events and stats cover them all.
 
         Returns:
             :class:`Trajectory` with the frame numbers since the start of the simulation.
@@ -332,48 +348,49 @@ class Simulator:
         events = check.flag("events", events)
         if events:
             event_capacity = check.positive_int("event_capacity", event_capacity)
+        keep = (None if spheres is None
+                else np.asarray(check.index_list("spheres", spheres, self._n), dtype=np.int64))
         gathered = []
         dropped = 0
         stops = list(range(every, frames + 1, every))
         if not stops or stops[-1] != frames:
             stops.append(frames)
-        n, count = self._n, len(stops) + 1
+        n, count = (self._n if keep is None else keep.size), len(stops) + 1
+        pick = (lambda a: a) if keep is None else (lambda a: a[..., keep, :])
         first = self.frame
         position = np.empty((count, n, 3), dtype=self._p.np_dtype)
         orientation = np.empty((count, n, 4), dtype=self._p.np_dtype)
         velocity = np.empty((count, n, 3), dtype=self._p.np_dtype) if velocities else None
         angular = np.empty((count, n, 3), dtype=self._p.np_dtype) if velocities else None
-        position[0] = self.state_0.position.numpy()
-        orientation[0] = self.state_0.orientation.numpy()
+        position[0] = pick(self.state_0.position.numpy())
+        orientation[0] = pick(self.state_0.orientation.numpy())
         if velocities:
-            velocity[0], angular[0] = self._motion_now()
+            velocity[0], angular[0] = (pick(a) for a in self._motion_now())
         bar = _progress_bar(frames, progress)
         start = time.perf_counter()
         row = 1
         try:
             per_launch = self._frames_per_launch(every)
             done = 0
+            kept = 0  # contact rows kept so far (the run's first ones: none lost before)
             while done < frames:
                 todo = min(per_launch, frames - done)
+                if events:
+                    todo, records, parts, lost = self._launch_recording_events(
+                        todo, every, velocities, max(event_capacity - kept, 0))
+                    gathered.extend(parts)
+                    kept += sum(len(part["frame"]) for part in parts)
+                    dropped += lost
+                else:
+                    records = self._records(-(-todo // every), velocities)
+                    self._launch(todo, every, records)
                 rows = -(-todo // every)  # every full interval, and a last partial one
-                records = self._records(rows, velocities)
-                buffers = None
-                if events:
-                    buffers = [event_buffer(self._p, self.device, event_capacity)
-                               for _ in (self._shards if len(self._shards) > 1 else [None])]
-                base = self.frame
-                self._launch(todo, every, records, buffers)
-                if events:
-                    for buffer in buffers:
-                        columns, lost = _read_events(buffer, base)
-                        gathered.append(columns)
-                        dropped += lost
                 done += todo
-                position[row:row + rows] = _host(records["record_position_out"])
-                orientation[row:row + rows] = _host(records["record_orientation_out"])
+                position[row:row + rows] = pick(_host(records["record_position_out"]))
+                orientation[row:row + rows] = pick(_host(records["record_orientation_out"]))
                 if velocities:
-                    velocity[row:row + rows] = _host(records["record_velocity_out"])
-                    angular[row:row + rows] = _host(records["record_angular_velocity_out"])
+                    velocity[row:row + rows] = pick(_host(records["record_velocity_out"]))
+                    angular[row:row + rows] = pick(_host(records["record_angular_velocity_out"]))
                 row += rows
                 bar.update(todo)
         finally:
@@ -381,10 +398,58 @@ class Simulator:
             self._seconds += time.perf_counter() - start
         return Trajectory(frame=np.array([first] + [first + k for k in stops], dtype=np.int64),
                           dt=self.dt, position=position, orientation=orientation,
-                          radius=self._radius_host.copy(), velocity=velocity,
+                          radius=(self._radius_host if keep is None
+                                  else self._radius_host[keep]).copy(),
+                          velocity=velocity, sphere_ids=None if keep is None else keep.copy(),
                           angular_velocity=angular,
-                          events=(_contact_events(gathered, dropped, self.dt, self.settings())
-                                  if events else None))
+                          events=(_contact_events(gathered, dropped, self.dt, self.settings(),
+                                                  event_capacity) if events else None))
+
+    def _launch_recording_events(self, todo: int, every: int, velocities: bool, room: int,
+                                 ) -> tuple[int, dict, list[dict], int]:
+        """One launch of up to ``todo`` frames that records contacts, keeping every one while
+        ``room`` rows are left, so that the rows a run keeps are its earliest whatever the
+        shards and launches: a shard's buffer holds what its launch can produce, at most
+        ``room`` rows; when one overflows (the kernel still counts every contact), the launch
+        is undone (the state it read is intact, the counters restored) and run again with
+        buffers of the exact counts, or over half the frames when those would hold more than
+        twice ``room`` rows. With no room left the buffers have no rows and count only.
+
+        Returns:
+            ``(frames advanced, records, event columns per shard, contacts not kept)``.
+        """
+        shards = self._shards if len(self._shards) > 1 else [slice(0, self._n)]
+        exact = None
+        saved = ({k: wp.clone(v) for k, v in self.counters.items()} if room > 0 else None)
+        while True:
+            records = self._records(-(-todo // every), velocities)
+            if exact is not None:
+                sizes = exact
+            elif room > 0:
+                sizes = [min(room, (r.stop - r.start) * todo * self.max_bounces) for r in shards]
+            else:
+                sizes = [0] * len(shards)
+            buffers = [event_buffer(self._p, self.device, size) for size in sizes]
+            base = self.frame
+            self._launch(todo, every, records, buffers)
+            counts = [int(b["event_count_out"].numpy()[0]) for b in buffers]
+            if room == 0 or all(c <= size for c, size in zip(counts, sizes, strict=True)):
+                break
+            # overflow: undo the launch (the kernel never writes the state it reads)
+            self.state_0, self.state_1 = self.state_1, self.state_0
+            self.frame -= todo
+            for name, array in self.counters.items():
+                wp.copy(array, saved[name])
+            if sum(counts) <= 2 * room or todo <= every:
+                exact = counts
+            else:
+                todo = max(every, todo // 2 // every * every)
+        parts, lost = [], 0
+        for buffer in buffers:
+            columns, missed = _read_events(buffer, base)
+            parts.append(columns)
+            lost += missed
+        return todo, records, parts, lost
 
     def settings(self) -> dict[str, str]:
         """The run's settings as text (what an events file stores with its rows): ``scene``,
@@ -452,7 +517,9 @@ class Simulator:
         return Stats(frames=self.frame, sphere_frames=self.frame * self._n,
                      bounces=int(bounces.astype(np.int64).sum()),
                      capped=int(capped.astype(np.int64).sum()),
-                     capped_spheres=int(np.count_nonzero(capped)), seconds=self._seconds)
+                     capped_spheres=int(np.count_nonzero(capped)), seconds=self._seconds,
+                     broad_phase=self.broad_phase,
+                     requested_broad_phase=self.requested_broad_phase)
 
     def __len__(self) -> int:
         return self._n
@@ -493,10 +560,12 @@ def _read_events(buffer: dict, frame_base: int) -> tuple[dict, int]:
     return columns, count - rows
 
 
-def _contact_events(parts: list[dict], dropped: int, dt: float, settings: dict):
+def _contact_events(parts: list[dict], dropped: int, dt: float, settings: dict,
+                    capacity: int):
     """One :class:`warpsim.ContactEvents` from the launches' rows, ordered by frame, then
     sphere, then the order the contacts happened in (a stable sort keeps it: one thread writes a
-    sphere's contacts in sequence)."""
+    sphere's contacts in sequence); the first ``capacity`` rows of that order are kept, the
+    others added to ``dropped``."""
     from .events import ContactEvents
     from .vocabulary import ContactKind
 
@@ -506,6 +575,8 @@ def _contact_events(parts: list[dict], dropped: int, dt: float, settings: dict):
         return empty
     merged = {key: np.concatenate([part[key] for part in parts]) for key in parts[0]}
     order = np.lexsort((merged["sphere"], merged["frame"]))
+    dropped += max(0, order.size - capacity)
+    order = order[:capacity]
     merged = {key: value[order] for key, value in merged.items()}
     merged["box"] = merged["box"].astype(np.int32)
     merged["fraction"] = np.clip(merged["fraction"], 0.0, 1.0)

@@ -25,6 +25,10 @@ class Trajectory:
             (F, N, 3), or None when not recorded.
         events: the contacts of the run (:class:`warpsim.ContactEvents`), or None when
             not recorded (``Simulator.run(..., events=True)``).
+        sphere_ids: the index in the simulated swarm of each of the N spheres, shape (N,),
+            int64, or None for ``0 .. N-1`` (a trajectory of the whole swarm); set by
+            :meth:`subset` and ``Simulator.run(..., spheres=...)``, written as the USD
+            instancer's ``ids``.
     """
 
     frame: np.ndarray
@@ -35,6 +39,13 @@ class Trajectory:
     velocity: np.ndarray | None = None
     angular_velocity: np.ndarray | None = None
     events: object | None = None
+    sphere_ids: np.ndarray | None = None
+
+    def ids(self) -> np.ndarray:
+        """:attr:`sphere_ids`, or ``0 .. N-1`` when unset, (N,) int64."""
+        if self.sphere_ids is None:
+            return np.arange(self.sphere_count, dtype=np.int64)
+        return np.asarray(self.sphere_ids, dtype=np.int64)
 
     @property
     def time(self) -> np.ndarray:
@@ -66,7 +77,7 @@ class Trajectory:
 
     def subset(self, spheres) -> Trajectory:
         """The same frames for the spheres at the given indices (a copy; events are kept whole,
-        their sphere indices stay those of the full swarm)."""
+        their sphere indices stay those of the full swarm; :attr:`sphere_ids` follows)."""
         idx = np.asarray(spheres, dtype=np.int64)
 
         def pick(values):
@@ -76,4 +87,5 @@ class Trajectory:
                           position=self.position[:, idx].copy(),
                           orientation=self.orientation[:, idx].copy(),
                           radius=self.radius[idx].copy(), velocity=pick(self.velocity),
-                          angular_velocity=pick(self.angular_velocity), events=self.events)
+                          angular_velocity=pick(self.angular_velocity), events=self.events,
+                          sphere_ids=self.ids()[idx].copy())

@@ -337,7 +337,7 @@ def _cmd_run(args) -> int:
           f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
     print(bounce_line(stats, traj.events))
     print(energy_line(sim, state))
-    print(f"broad phase: {describe_broad_phase(sim.broad_phase, args.broad_phase)}")
+    print(f"broad phase: {describe_broad_phase(stats.broad_phase, stats.requested_broad_phase)}")
 
     def write_scene():
         path = export.write_usd(out, scene, traj, spheres=subset, velocities=args.velocities,
