@@ -37,6 +37,11 @@ from .usd_read import read_usd_boxes, read_usd_frame
 from .usd_write import OBSTACLE_COLOR, SPHERE_DARK, SPHERE_LIGHT
 
 SUPERSAMPLING = 2  # rendered at this many times the size per axis, then averaged down
+#: Largest picture drawn [pixels]: rendered at SUPERSAMPLING^2 times that with colour and depth
+#: (32 B per rendered pixel) and batch temporaries, 4096x4096 holds about 2.5 GB; larger is
+#: refused before any buffer is made.
+MAX_PIXELS = 4096 * 4096
+MAX_SIDE = 16384
 PIXELS_PER_BATCH = 1 << 20  # sphere pixels ray-cast together: bounds the temporary memory
 PREVIEW_SEGMENTS = 6  # edges per quarter circle of a rounded box in the picture
 AZIMUTH_DEG = 45.0  # default view direction around +y, from +z towards +x [deg]
@@ -493,6 +498,9 @@ def _size(size) -> tuple[int, int]:
         raise ValueError(f"size must be (width, height) in pixels, got {size!r}") from exc
     if width < 8 or height < 8 or (width, height) != tuple(size):
         raise ValueError(f"size must be two integers >= 8, got {size!r}")
+    if max(width, height) > MAX_SIDE or width * height > MAX_PIXELS:
+        raise ValueError(f"size must be at most {MAX_SIDE} pixels on a side and {MAX_PIXELS:,} "
+                         f"in all (4096x4096), got {width}x{height}")
     return width, height
 
 

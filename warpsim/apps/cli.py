@@ -46,6 +46,12 @@ def _size(text: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"size must look like 960x540, got {text!r}") from exc
     if w < 16 or h < 16:
         raise argparse.ArgumentTypeError(f"size must be at least 16x16, got {text!r}")
+    from ..export.preview import MAX_PIXELS, MAX_SIDE  # the renderer's limit, said once
+
+    if max(w, h) > MAX_SIDE or w * h > MAX_PIXELS:
+        raise argparse.ArgumentTypeError(
+            f"size must be at most {MAX_SIDE} pixels on a side and {MAX_PIXELS:,} in all "
+            f"(4096x4096), got {text!r}")
     return w, h
 
 
@@ -125,6 +131,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="after the run, compare K spheres with the exact reference")
     run.add_argument("--max-bytes", type=float, default=2e9,
                      help="refuse (before simulating) a file estimated larger [bytes]")
+    run.add_argument("--max-memory", type=float,
+                     help="refuse (before drawing the spheres) a run estimated to hold more "
+                          "memory [bytes] (default: 80%% of the machine's)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.add_argument("--dask", nargs="?", const="local", metavar="ADDRESS",
                      help="run in shards on a Dask cluster: a LocalCluster here, or the "
@@ -138,8 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
     prev = sub.add_parser("preview",
                           help="draw a frame of a warpsim USD file to an image, or a movie")
     prev.add_argument("usd", help="a .usdc/.usda written by 'warpsim run'")
-    prev.add_argument("--frame", type=int, default=-1,
-                      help="recorded frame; negative counts from the end (default: -1, the last)")
+    prev.add_argument("--frame", type=int,
+                      help="image: the recorded frame; negative counts from the end (default: "
+                           "-1, the last); not with --movie")
     prev.add_argument("-o", "--output", help="output image (.png, .jpg, ...)")
     prev.add_argument("--movie", metavar="OUT.mp4", help="write a movie (.mp4 or .gif) instead")
     prev.add_argument("--every", type=int, default=1,
@@ -237,6 +247,37 @@ def _frame_range(args, scene_frames: int) -> tuple[int, int]:
     return start, end
 
 
+def check_memory(args, n: int, kept: int, records: int, every: int, frames: int,
+                 usd_bytes: float) -> None:
+    """Refuse, before anything is drawn, a run whose memory (:mod:`warpsim.footprint`: the
+    swarm, the device state, the kept frames, the launch and event buffers, and the USD stage
+    being written) is above ``--max-memory``."""
+    from .. import footprint
+    from .. import validation as check
+    from ..simulator import DEFAULT_EVENT_CAPACITY, LAUNCH_SPHERE_FRAMES
+    from ..validation import bounce_cap
+
+    event_rows = 0
+    if args.events is not None:
+        capacity = (DEFAULT_EVENT_CAPACITY if args.events_capacity is None
+                    else args.events_capacity)
+        bounces = bounce_cap(8 if args.max_bounces is None else args.max_bounces)
+        event_rows = 2 * min(capacity, n * frames * bounces)  # kept rows and a launch's
+    size = footprint.run_bytes(n, records, kept=kept,
+                               precision_bytes=4 if args.precision == "float32" else 8,
+                               velocities=bool(args.velocities),
+                               launch_sphere_frames=LAUNCH_SPHERE_FRAMES, every=every,
+                               event_rows=event_rows)
+    size = footprint.Footprint(swarm=size.swarm, device=size.device,
+                               trajectory=size.trajectory + int(usd_bytes), launch=size.launch,
+                               events=size.events)
+    limit = (footprint.default_limit() if args.max_memory is None
+             else check.scalar("max_memory", args.max_memory, positive=True))
+    footprint.check_fits(size, limit, "--max-memory",
+                         "simulate fewer spheres (-n), keep fewer frames (--every, "
+                         "--start/--end) or spheres (--spheres)")
+
+
 def _run_sharded(args, scene):
     """``warpsim run SCENE --dask [ADDRESS] [--shards N] [--block B]``:
     :func:`warpsim.distributed.run` from the command line's options (``--shards`` or
@@ -290,7 +331,6 @@ def _cmd_run(args) -> int:
     if args.dask is not None or args.shards is not None or args.block is not None:
         print(_run_sharded(args, scene))  # sharded: the spheres are drawn on the workers
         return 0
-    swarm = scene.spawn(n=args.count, seed=args.seed)
     start, end = _frame_range(args, scene.frames)
     every = check.positive_int("every", args.every)
     if args.output is not None and not args.output.strip():
@@ -305,17 +345,16 @@ def _cmd_run(args) -> int:
     if args.error_sample is not None:
         check.positive_int("error_sample", args.error_sample)
     options = _run_options(args)
-    check_device(args.device, args.debug_mode)
-    subset = None if args.spheres is None else sphere_selection(args.spheres, len(swarm))
-    extra = _simulator_options(args)
-    sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
-                       device=args.device, precision=args.precision,
-                       broad_phase=args.broad_phase, **extra)
+    # sizes first: the file and the memory the run will hold, before any sphere is drawn
+    if scene.emitter is None:
+        raise ValueError(f"scene {scene.name!r} has no emitter")
+    n = check.positive_int("n", scene.emitter.count if args.count is None else args.count)
+    subset = None if args.spheres is None else sphere_selection(args.spheres, n)
+    n_written = n if subset is None else subset.size
+    n_records = len(sorted(set(range(start, end + 1, every)) | {end}))
     from .. import export
 
-    n_written = len(swarm) if subset is None else subset.size
-    n_records = len(sorted(set(range(start, end + 1, every)) | {end}))
-    spinning = bool(scene.friction > 0.0 or np.any(swarm.angular_momentum != 0.0))
+    spinning = bool(scene.friction > 0.0 or np.any(np.asarray(scene.emitter.angular_momentum) != 0.0))
     estimate = export.estimate_usd_bytes(n_written, n_records, out.suffix, boxes=scene.boxes,
                                          spinning=spinning, velocities=args.velocities)
     if estimate > args.max_bytes:
@@ -323,6 +362,15 @@ def _cmd_run(args) -> int:
                          f"({n_written} spheres x {n_records} frames), above --max-bytes "
                          f"{args.max_bytes:,.0f}: record fewer frames (--every, --start/--end) "
                          f"or spheres (--spheres), or raise --max-bytes")
+    check_memory(args, n, n_written, n_records, every, end - start, estimate)
+    check_device(args.device, args.debug_mode)
+    swarm = scene.spawn(n=n, seed=args.seed)
+    extra = _simulator_options(args)
+    sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
+                       device=args.device, precision=args.precision,
+                       broad_phase=args.broad_phase, **extra)
+    if subset is not None:
+        options["spheres"] = subset
     print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "
           f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
           f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
@@ -340,8 +388,7 @@ def _cmd_run(args) -> int:
     print(f"broad phase: {describe_broad_phase(stats.broad_phase, stats.requested_broad_phase)}")
 
     def write_scene():
-        path = export.write_usd(out, scene, traj, spheres=subset, velocities=args.velocities,
-                                warn=False)
+        path = export.write_usd(out, scene, traj, velocities=args.velocities, warn=False)
         print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {len(traj)} frames "
               f"{int(traj.frame[0])}..{int(traj.frame[-1])}, {n_written} spheres)")
 
@@ -419,6 +466,10 @@ def _cmd_preview(args) -> int:
         from ..export.files import check_writable
         from ..export.movie import check_movie_support, render_movie
 
+        if args.frame is not None:
+            raise ValueError("--frame picks the frame of an image (-o); a movie (--movie) "
+                             "draws every recorded frame (--every to thin them)")
+
         check_movie_support(args.movie)
         check_writable(args.movie, what="movie")
         path = render_movie(args.usd, args.movie, every=args.every, size=args.size,
@@ -431,7 +482,7 @@ def _cmd_preview(args) -> int:
 
     image_format(args.output)
     check_writable(args.output, what="image")
-    frame = export.read_usd_frame(args.usd, args.frame).frame[0]
+    frame = export.read_usd_frame(args.usd, -1 if args.frame is None else args.frame).frame[0]
     path = export.render_preview(args.usd, int(frame), args.output, size=args.size, **angles)
     print(f"wrote {path} (frame {frame}, {args.size[0]}x{args.size[1]})")
     return 0
