@@ -299,7 +299,8 @@ ERROR_CASES = [
      "box_grid[0].count[1] must be <= 2147483647 (integers must be below 2**31), got "
      "99999999999"),
     ("grid too many boxes", MINIMAL + GRID.replace("[2, 2, 1]", "[1000, 1000, 1]"),
-     "box_grid[0].count [1000, 1000, 1] makes 1000000 boxes, more than 100000"),
+     "box_grid[0].count [1000, 1000, 1] makes 1000000 boxes, more than 100000 in the scene "
+     "with the 4 boxes before it"),
     ("grid bad stagger axis", MINIMAL + GRID + "stagger_axis = 'w'\n",
      "box_grid[0].stagger_axis must be one of 'x', 'y', 'z', got 'w'"),
     ("grid negative half extent", MINIMAL + GRID.replace("[0.1, 0.1, 0.1]", "[0.1, 0.1, -1.0]"),

@@ -236,9 +236,9 @@ def _grid(table: dict, where: str, made: int = 0,
         raise ValueError(f"{where}.count must be [nx, ny, nz], got {counts!r}")
     nx, ny, nz = (check.positive_int(f"{where}.count[{a}]", c) for a, c in enumerate(counts))
     if made + nx * ny * nz > MAX_BOXES:
-        before = f" after the {made} before it" if made else ""
-        raise ValueError(f"{where}.count {counts} makes {nx * ny * nz} boxes{before}, more than "
-                         f"{MAX_BOXES} in the scene")
+        before = f" with the {made} boxes before it" if made else ""
+        raise ValueError(f"{where}.count {counts} makes {nx * ny * nz} boxes, more than "
+                         f"{MAX_BOXES} in the scene{before}")
     spacing = check.vec3(f"{where}.spacing", _require(table, where, "spacing"))
     stagger = check.vec3(f"{where}.stagger", table.get("stagger", (0.0, 0.0, 0.0)))
     axis = table.get("stagger_axis", "y")
