@@ -8,6 +8,7 @@ import pytest
 from PIL import Image
 
 import warpsim as ws
+from warpsim.distributed.draw import sharded_spawn  # the command line's draw
 
 
 def warpsim(*args, cwd=None):
@@ -35,7 +36,7 @@ def test_run_writes_usd_and_preview_draws_a_frame(tmp_path):
     assert traj.position.shape == (13, 24, 3)
     # the file holds what the simulator computes for the same scene, seed and count
     scene = ws.Scene.load("wedge")
-    sim = ws.Simulator(scene, scene.spawn(n=24, seed=5))
+    sim = ws.Simulator(scene, sharded_spawn(scene, 24, 5))
     expected = sim.run(12)
     np.testing.assert_array_equal(traj.position, expected.position.astype(np.float32))
 
@@ -177,7 +178,7 @@ def test_frame_range_and_sphere_subset(tmp_path, capsys):
     traj = ws.export.read_usd(usd)
     np.testing.assert_array_equal(traj.frame, [10, 14, 18, 20])
     scene = ws.Scene.load("wedge")
-    expected = ws.Simulator(scene, scene.spawn(n=20, seed=2)).run(20)
+    expected = ws.Simulator(scene, sharded_spawn(scene, 20, 2)).run(20)
     np.testing.assert_array_equal(traj.position,
                                   expected.position[[10, 14, 18, 20]][:, [3, 5, 7]]
                                   .astype(np.float32))
@@ -246,7 +247,7 @@ def test_velocities_and_events_options(tmp_path, capsys):
     assert code == 0, err
     traj = ws.export.read_usd(usd)
     scene = ws.Scene.load("wedge")
-    expected = ws.Simulator(scene, scene.spawn(n=6, seed=3)).run(5, velocities=True)
+    expected = ws.Simulator(scene, sharded_spawn(scene, 6, 3)).run(5, velocities=True)
     # the file holds the simulator's velocities at each recorded frame, to the float32 bit
     np.testing.assert_array_equal(traj.velocity, expected.velocity.astype(np.float32))
     np.testing.assert_allclose(traj.angular_velocity, expected.angular_velocity,

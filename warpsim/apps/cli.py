@@ -138,9 +138,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--dask", nargs="?", const="local", metavar="ADDRESS",
                      help="run in shards on a Dask cluster: a LocalCluster here, or the "
                           "scheduler at ADDRESS (needs warpsim[dask]; README 'On a cluster')")
-    run.add_argument("--shards", type=int, help="with --dask: shards (default: 4 per worker)")
+    run.add_argument("--shards", type=int,
+                     help="run in this many shards, one USD layer each: on the Dask cluster "
+                          "with --dask (default: 4 per worker), else in this process; at most "
+                          "one shard per block of spheres")
     run.add_argument("--block", type=int,
-                     help="with --dask: spheres per block of the sharded draw (default 1024)")
+                     help="spheres per block of the draw (default 1024); every run, sharded "
+                          "or not, draws the same spheres for the same -n, --seed and --block")
 
     sub.add_parser("scenes", help="list the bundled scenes")
 
@@ -288,6 +292,7 @@ def _run_sharded(args, scene):
         ValueError: an option a sharded run does not support, or a bad value (named).
     """
     from .. import distributed
+    from .. import validation as check
     from ..export.files import default_name
 
     for option, value in (("--spheres", args.spheres), ("--events", args.events),
@@ -312,6 +317,12 @@ def _run_sharded(args, scene):
     print(f"{scene.name}: {n} spheres, {len(scene.boxes)} obstacles, sharded on {where}",
           file=sys.stderr)
     block = distributed.DEFAULT_BLOCK if args.block is None else args.block
+    if args.shards is not None and n is not None:
+        blocks = distributed.block_count(check.positive_int("n", n),
+                                         check.positive_int("block", block))
+        if check.positive_int("shards", args.shards) > blocks:
+            print(f"{blocks} shards, not {args.shards}: {n} spheres make {blocks} blocks of "
+                  f"{block} and a shard is whole blocks (--block sets the size)", file=sys.stderr)
     return distributed.run(scene, output, n=args.count, seed=args.seed, frames=end,
                            start=args.start, every=args.every, client=client,
                            shards=args.shards, block=block, threads=args.workers, dt=args.dt,
@@ -328,7 +339,7 @@ def _cmd_run(args) -> int:
     from ..export.files import check_writable, default_name
 
     scene = ws.Scene.load(args.scene)
-    if args.dask is not None or args.shards is not None or args.block is not None:
+    if args.dask is not None or args.shards is not None:
         print(_run_sharded(args, scene))  # sharded: the spheres are drawn on the workers
         return 0
     start, end = _frame_range(args, scene.frames)
@@ -364,7 +375,12 @@ def _cmd_run(args) -> int:
                          f"or spheres (--spheres), or raise --max-bytes")
     check_memory(args, n, n_written, n_records, every, end - start, estimate)
     check_device(args.device, args.debug_mode)
-    swarm = scene.spawn(n=n, seed=args.seed)
+    # the block draw of a sharded run, so that the same command with --shards or --dask
+    # simulates the same spheres, bit for bit
+    from ..distributed.draw import DEFAULT_BLOCK, sharded_spawn
+
+    swarm = sharded_spawn(scene, n, args.seed, DEFAULT_BLOCK if args.block is None
+                          else check.positive_int("block", args.block))
     extra = _simulator_options(args)
     sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
                        device=args.device, precision=args.precision,

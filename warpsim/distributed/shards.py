@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import re
 import secrets
 import sys
 import threading
@@ -350,9 +351,10 @@ class RunSummary:
                  else "this process")
         recomputed = (f"{len(self.recomputed)} of {self.shards} shards recomputed"
                       + (f", {len(self.reused)} reused" if self.reused else ""))
+        speed = (f"{self.sphere_frames_per_second:,.0f} sphere-frames/s" if self.recomputed
+                 else "nothing simulated: every shard was current")
         return [f"simulated {self.frames} frames x {self.spheres:,} spheres in {self.shards} "
-                f"shards on {where}: {recomputed}; {self.seconds:.2f} s, "
-                f"{self.sphere_frames_per_second:,.0f} sphere-frames/s",
+                f"shards on {where}: {recomputed}; {self.seconds:.2f} s, {speed}",
                 f"bounces: {self.bounces:,} ({self.bounces / per_sphere_frame:.3f} per "
                 f"sphere-frame); capped: {self.capped:,} sphere-frames",
                 f"wrote {self.path} ({self.shards} shard layers in {self.path.stem}.shards/)"]
@@ -490,6 +492,7 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         "keys": [r["key"] for r in results], "digests": [r["digest"] for r in results],
         "starts": [b[0] for b in spec.bounds], "stops": [b[1] for b in spec.bounds],
         "n": n, "seed": seed, "block": block, "frames": end, "every": every})
+    _remove_stale_layers(folder, layers)
     recomputed = tuple(sorted(computed))
     return RunSummary(
         path=out, shards=spec.count, recomputed=recomputed,
@@ -502,6 +505,19 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         bounces=sum(r["bounces"] for r in results), capped=sum(r["capped"] for r in results),
         digests=tuple(r["digest"] for r in results),
         computed_by={i: done[i]["worker"] for i in recomputed})
+
+def _remove_stale_layers(folder: Path, layers: list[Path]) -> list[Path]:
+    """Remove the shard layers of an earlier run with other shards (``shard_<digits>.usdc``
+    or ``.usda`` files the new root does not compose); returns what was removed. Nothing else
+    in the folder is touched."""
+    keep = {Path(p).name for p in layers}
+    removed = []
+    for path in sorted(Path(folder).glob("shard_*.usd[ac]")):
+        if path.name not in keep and re.fullmatch(r"shard_\d+\.usd[ac]", path.name):
+            path.unlink()
+            removed.append(path)
+    return removed
+
 
 def _replace(spec: RunSpec, **changes) -> RunSpec:
     from dataclasses import replace
