@@ -348,3 +348,17 @@ def test_too_many_shards_says_why_and_stale_layers_go(tmp_path, capsys):
     assert "nothing simulated" in out and "0 sphere-frames/s" not in out
     code, out, err = cli(capsys, *args, "--shards", 9)
     assert code == 0 and "4 shards, not 9: 1200 spheres make 4 blocks of 300" in err
+
+
+@pytest.mark.parametrize("slope", [-1.31, 0.0, 0.3, 1.0, 2.0])
+def test_accuracy_study_reports_an_order_only_where_the_error_falls_with_dt(slope):
+    from warpsim.analysis.accuracy import MIN_ORDER, _orders
+
+    dts = [1 / 30, 1 / 60, 1 / 120, 1 / 240]
+    rows = [{"label": "f", "family": "dt", "dt": dt, "error_m": 1e-3 * (dt * 60) ** slope}
+            for dt in dts]
+    fam = _orders(rows)["f"]
+    if slope >= MIN_ORDER:
+        assert fam["order"] == pytest.approx(slope, abs=1e-9)
+    else:
+        assert fam["order"] is None and "does not depend on dt" in fam["note"]

@@ -127,6 +127,13 @@ class Simulator:
             launched from its own thread (Warp runs one CPU launch on one core and releases the
             GIL during it); None uses every core of the machine, 1 one core. Results are
             bit-identical whatever the number. On a CUDA device one launch covers the swarm.
+            (``warpsim.distributed.run`` calls these ``threads``: its ``workers`` are Dask
+            processes.)
+        motion: ``"linear"`` (the chord of each frame) or ``"ballistic"`` (the exact parabola);
+            None takes ``scene.motion``.
+        energy_correction: reset each sphere's speed from its energy after each frame; None
+            takes the scene's setting for the motion (``scene.energy_correction_for``: on for
+            the linear model, off for the ballistic one, unless the scene says).
 
     Attributes:
         broad_phase: the broad phase compiled into the kernel: ``"brute"``, ``"bvh"``,

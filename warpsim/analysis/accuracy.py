@@ -347,6 +347,11 @@ def _time(scene, swarm, s: Setting, device, frames: int) -> dict:
             "ns_per_sphere_frame": 1e9 / rate if rate > 0 else None}
 
 
+#: A fitted slope below this is not a convergence order: the error does not fall with dt (the
+#: ballistic model's, whose error is rounding and the contact solve, not the step).
+MIN_ORDER = 0.5
+
+
 def _orders(rows: list[dict]) -> dict:
     """Per family: its points and, for a dt family, the fitted convergence order."""
     out: dict = {}
@@ -363,7 +368,13 @@ def _orders(rows: list[dict]) -> dict:
         use = err > ORDER_FIT_FLOOR
         if use.sum() >= 2 and np.ptp(np.log(dt[use])) > 0:
             slope, intercept = np.polyfit(np.log(dt[use]), np.log(err[use]), 1)
-            fam["order"], fam["fit_log_intercept"] = float(slope), float(intercept)
+            if slope < MIN_ORDER:  # the error does not fall with dt: no order to report
+                fam["order"] = None
+                fam["note"] = (f"the error does not depend on dt ({err.min():.2g} to "
+                               f"{err.max():.2g} m for dt {dt.min():.3g} to {dt.max():.3g} s, "
+                               f"fitted slope {slope:.2f}): no convergence order")
+            else:
+                fam["order"], fam["fit_log_intercept"] = float(slope), float(intercept)
         else:
             fam["order"] = None
             fam["note"] = "errors at float rounding: no order"
@@ -550,6 +561,8 @@ def _print_summary(result: dict) -> None:
     for label, fam in result["families"].items():
         if fam.get("order") is not None:
             print(f"convergence order of {label}: {fam['order']:.2f}")
+        elif fam.get("note"):
+            print(f"{label}: {fam['note']}")
     for note in result["notes"]:
         print(f"note: {note}")
 
