@@ -320,11 +320,18 @@ def test_plain_and_sharded_runs_simulate_the_same_spheres(tmp_path, capsys, n, s
     positions, bit for bit, at every frame (the sharded stage read back whole)."""
     plain, sharded = tmp_path / "p.usdc", tmp_path / "s.usdc"
     args = ("run", "room", "-n", n, "--frames", 6, "--block", 512, "--no-progress")
-    code, _, err = cli(capsys, *args, "-o", plain)
+    code, plain_out, err = cli(capsys, *args, "-o", plain)
     assert code == 0, err
     code, out, err = cli(capsys, *args, "--shards", shards, "-o", sharded)
     assert code == 0, err
     assert f"in {shards} shards" in out
+
+    def energy(text):
+        return [line for line in text.splitlines() if line.startswith("energy")]
+
+    assert energy(out) == energy(plain_out) and len(energy(out)) == 1  # the same swarm's
+    capped = [line for line in plain_out.splitlines() if "capped:" in line][0]
+    assert capped.split("capped:")[1] in out  # sphere-frames and spheres, as the plain run
     from warpsim import distributed
 
     one = ws.export.read_usd(plain)
@@ -346,6 +353,7 @@ def test_too_many_shards_says_why_and_stale_layers_go(tmp_path, capsys):
     assert len(list((tmp_path / "s.shards").glob("shard_*.usdc"))) == 2  # the 4 old ones gone
     code, out, err = cli(capsys, *args, "--shards", 2)  # all reused: no speed of nothing
     assert "nothing simulated" in out and "0 sphere-frames/s" not in out
+    assert "energy drift:" in out  # kept in the reused layers' manifests
     code, out, err = cli(capsys, *args, "--shards", 9)
     assert code == 0 and "4 shards, not 9: 1200 spheres make 4 blocks of 300" in err
 
@@ -362,3 +370,16 @@ def test_accuracy_study_reports_an_order_only_where_the_error_falls_with_dt(slop
         assert fam["order"] == pytest.approx(slope, abs=1e-9)
     else:
         assert fam["order"] is None and "does not depend on dt" in fam["note"]
+
+
+def test_warp_starts_quietly_where_dask_workers_start_it():
+    """The shard task starts Warp with its native start-up messages silenced (a machine
+    without CUDA prints a warning otherwise; with it, there is nothing to hide either way)."""
+    import subprocess
+    import sys
+
+    code = "from warpsim.warp_start import init_quietly; init_quietly(); print('ok')"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "ok"
+    assert "warning" not in out.stderr.lower(), out.stderr

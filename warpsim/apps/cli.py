@@ -24,8 +24,6 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 USD_SUFFIXES = (".usdc", ".usda")
 EVENTS_SUFFIXES = (".parquet",)
-#: Energy floors below this [J] are treated as zero when scaling relative energy figures.
-ENERGY_SCALE_FLOOR = 1e-30
 #: Default for ``run --velocities``: off. Measured (benchmarks/usd_write.py): velocities add
 #: 12 B per sphere-frame in .usdc (24 B with spin) to the 12 B of a non-spinning sphere's
 #: position, doubling the per-frame data of most bundled scenes (the default room run, 400
@@ -182,36 +180,11 @@ def _cmd_scenes(_args) -> int:
     return 0
 
 
-def _energy_scale(sim) -> tuple[np.ndarray, np.ndarray]:
-    """Initial energies (N,) and each sphere's energy above the lowest point of the scene (N,),
-    the scale of relative energy figures (near 0: kept; 1: all of it) [J]."""
-    scene = sim.scene
-    g = scene.gravity
-    if len(scene.boxes) and np.any(g):
-        corners = scene.boxes.center + scene.boxes.bounding_radius()[:, None] * np.sign(g)
-        floor = corners[np.argmin(corners @ -g)]
-    else:
-        floor = sim.energy_origin
-    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
-    floor_potential = -sim.mass * ((floor - sim.energy_origin) @ g)
-    return e0, np.maximum(e0 - floor_potential, ENERGY_SCALE_FLOOR)
-
-
 def energy_line(sim, state) -> str:
-    """The summary's energy line: the largest drift (elastic scenes), or what the contacts took
-    (``energy_retention < 1``: losing energy is the model, not an error)."""
-    e0, scale = _energy_scale(sim)
-    if not len(e0):
-        return "energy: no spheres"
-    energy = sim.mechanical_energy(state)
-    if sim.scene.energy_retention < 1.0:
-        lost = float(np.sum(e0 - energy) / np.sum(scale))
-        gained = float(np.max((energy - e0) / scale))
-        line = (f"energy lost at contacts: {100.0 * lost:.1f}% of the energy above the lowest "
-                f"obstacle (energy_retention = {sim.scene.energy_retention:g})")
-        return line + (f"; largest gain {gained:.2e} (relative)" if gained > 0.0 else "")
-    drift = float(np.max(np.abs(energy - e0) / scale))
-    return f"energy drift: {drift:.2e} (largest per sphere, relative)"
+    """The summary's energy line (:func:`warpsim.energy_figures.line`)."""
+    from .. import energy_figures
+
+    return energy_figures.line(energy_figures.figures(sim, state))
 
 
 def _run_options(args) -> dict:

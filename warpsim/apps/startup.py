@@ -4,28 +4,7 @@ requested device checked before anything is built."""
 
 from __future__ import annotations
 
-import contextlib
-import os
-import sys
-
-
-@contextlib.contextmanager
-def quiet_stderr(enabled: bool):
-    """Send file descriptor 2 to the null device: Warp's native code prints its start-up
-    warnings (no CUDA driver, say) with C ``fprintf``, which Python cannot intercept."""
-    if not enabled:
-        yield
-        return
-    sys.stderr.flush()
-    saved = os.dup(2)
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(null)
+from ..warp_start import quiet_stderr
 
 
 def init_warp(debug: bool) -> None:

@@ -203,14 +203,20 @@ def simulate_shard(scene: Scene, spec: RunSpec, index: int,
     trajectory = _concatenated(parts)
     stats = sim.stats
     key = spec.shard_key(index)
+    from .. import energy_figures
+
+    energy = energy_figures.figures(sim)
     digest = write_shard_layer(spec.layer_path(index), trajectory,
                                np.arange(start, stop, dtype=np.int64), index, spec.count,
                                {"key": key, "start": int(start), "stop": int(stop),
-                                "bounces": int(stats.bounces), "capped": int(stats.capped)},
+                                "bounces": int(stats.bounces), "capped": int(stats.capped),
+                                "capped_spheres": int(stats.capped_spheres),
+                                "energy": energy},
                                velocities=spec.velocities)
     return {"index": int(index), "digest": digest, "key": key,
             "seconds": time.perf_counter() - begin, "sphere_frames": int(stats.sphere_frames),
             "bounces": int(stats.bounces), "capped": int(stats.capped),
+            "capped_spheres": int(stats.capped_spheres), "energy": energy,
             "worker": _worker_name()}
 
 
@@ -248,7 +254,10 @@ def _scene_task(scene: Scene) -> Scene:
 
 def _dask_shard_task(scene: Scene, spec: RunSpec, index: int) -> dict:
     """:func:`simulate_shard` on a Dask worker, reporting progress as events on
-    ``spec.topic``."""
+    ``spec.topic``; Warp starts quietly there (no CUDA warning in the worker's log)."""
+    from ..warp_start import init_quietly
+
+    init_quietly()
     report = None
     if spec.topic:
         from distributed import get_worker
@@ -321,6 +330,10 @@ class RunSummary:
         sphere_frames: of the recomputed shards. seconds: wall time of the whole run [s].
         task_seconds: sum of the recomputed tasks' wall times [s].
         bounces, capped: contact and cap counters of all shards (reused ones included).
+        capped_spheres: spheres stopped by the cap at least once (None when a reused shard's
+            layer, from an earlier version, does not say).
+        energy: the energy figures of the whole swarm (:func:`warpsim.energy_figures.combine`
+            of the shards'), or None when a reused layer does not hold them.
     """
 
     path: Path
@@ -336,6 +349,8 @@ class RunSummary:
     task_seconds: float
     bounces: int
     capped: int
+    capped_spheres: int | None = None
+    energy: dict | None = None
     digests: tuple[str, ...] = field(default=(), repr=False)
     computed_by: dict[int, str] = field(default_factory=dict, repr=False)
     """Shard -> the worker (address) that computed it, for the recomputed shards."""
@@ -355,8 +370,11 @@ class RunSummary:
                  else "nothing simulated: every shard was current")
         return [f"simulated {self.frames} frames x {self.spheres:,} spheres in {self.shards} "
                 f"shards on {where}: {recomputed}; {self.seconds:.2f} s, {speed}",
-                f"bounces: {self.bounces:,} ({self.bounces / per_sphere_frame:.3f} per "
-                f"sphere-frame); capped: {self.capped:,} sphere-frames",
+                f"contacts: {self.bounces:,} (bounces and resting contacts together; "
+                f"{self.bounces / per_sphere_frame:.3f} per sphere-frame); capped: "
+                f"{self.capped:,} sphere-frames"
+                + ("" if self.capped_spheres is None else f", {self.capped_spheres} spheres"),
+                _energy_text(self.energy),
                 f"wrote {self.path} ({self.shards} shard layers in {self.path.stem}.shards/)"]
 
     def __str__(self) -> str:
@@ -503,8 +521,26 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         seconds=time.perf_counter() - began,
         task_seconds=sum(done[i]["seconds"] for i in computed),
         bounces=sum(r["bounces"] for r in results), capped=sum(r["capped"] for r in results),
+        capped_spheres=(None if any(r.get("capped_spheres") is None for r in results)
+                        else sum(int(r["capped_spheres"]) for r in results)),
+        energy=(None if any(not isinstance(r.get("energy"), dict) for r in results)
+                else _combined_energy([r["energy"] for r in results])),
         digests=tuple(r["digest"] for r in results),
         computed_by={i: done[i]["worker"] for i in recomputed})
+
+def _combined_energy(parts: list[dict]) -> dict:
+    from ..energy_figures import combine
+
+    return combine(parts)
+
+
+def _energy_text(energy: dict | None) -> str:
+    from ..energy_figures import line
+
+    if energy is None:
+        return "energy: not known (a reused shard layer from an earlier version lacks it)"
+    return line(energy)
+
 
 def _remove_stale_layers(folder: Path, layers: list[Path]) -> list[Path]:
     """Remove the shard layers of an earlier run with other shards (``shard_<digits>.usdc``
@@ -535,7 +571,9 @@ def _reusable(spec: RunSpec) -> dict[int, dict]:
         if manifest is not None and manifest.get("key") == spec.shard_key(i):
             found[i] = {"index": i, "key": manifest["key"], "digest": manifest["digest"],
                         "bounces": int(manifest.get("bounces", 0)),
-                        "capped": int(manifest.get("capped", 0))}
+                        "capped": int(manifest.get("capped", 0)),
+                        "capped_spheres": manifest.get("capped_spheres"),
+                        "energy": manifest.get("energy")}
     return found
 
 
