@@ -1,4 +1,4 @@
-"""Several bounces in one frame (sheet method 3, ``ws.bounce``) against analytic answers.
+"""Several bounces in one frame (``ws.bounce``) against analytic answers.
 
 Every expected value here is computed in float64 by the test itself, from geometry that has a
 closed form:
@@ -12,7 +12,8 @@ closed form:
 * Built backwards: pick the contact centre ``P`` on a plane with normal ``n``, a displacement
   ``d`` with ``d . n < 0`` and a fraction ``t``; start at ``A = P - t d``. The end is
   ``P + (1 - t) (d - 2 (d . n) n)``.
-* The friction torque of SPEC "Spin", written out in float64 (:func:`friction_spin_reference`).
+* The friction torque at a contact (README "What it models"), written out in float64
+  (:func:`friction_spin_reference`).
 
 Tolerances. A broken line is a chain of straight pieces; each piece rounds a handful of
 coordinates (the contact ``a + t d``, the reflected rest ``(1 - t)(d - 2 (d . n) n)``) at the
@@ -71,7 +72,7 @@ def reflect(d, n):
 
 
 def friction_spin_reference(L, v, n, r, m, dt, k_f, max_rot):
-    """SPEC "Spin" at one contact, float64: ``I = 2/5 m r^2``, ``Rot = L / I`` clamped,
+    """The spin update at one contact, float64: ``I = 2/5 m r^2``, ``Rot = L / I`` clamped,
     ``OC = -r n``, ``v_t,rel = v - (v.n) n + Rot x OC``, ``L += dt OC x (-k_f v_t,rel)``, then
     ``|L| / I`` clamped again."""
     inertia = 0.4 * m * r * r
@@ -295,7 +296,7 @@ def test_spin_two_contacts_in_one_frame():
        L0=st.tuples(*[st.floats(-0.05, 0.05)] * 3),
        k_f=st.floats(0.01, 20.0), mass=st.floats(0.5, 4.0), t=st.sampled_from([0.25, 0.5]))
 def test_spin_on_a_rotated_plate_matches_the_formula(q, local_d, L0, k_f, mass, t):
-    """Built backwards on a rotated zero-thickness plate: one contact, L from the SPEC formula
+    """Built backwards on a rotated zero-thickness plate: one contact, L from the torque formula
     (float64 reference), and the clamp holds."""
     q = np.asarray(q)
     assume(np.linalg.norm(q) > 0.1)

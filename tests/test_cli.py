@@ -290,3 +290,12 @@ def test_accuracy_is_forwarded():
     with pytest.raises(SystemExit) as info:
         main(["accuracy", "--help"])
     assert info.value.code == 0
+
+
+def test_python_dash_m_warpsim_is_the_command_line():
+    from warpsim import __version__
+
+    out = subprocess.run([sys.executable, "-m", "warpsim", "--version"], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == f"warpsim {__version__}"

@@ -1,6 +1,6 @@
 """Whole frames (``ws.Simulator``): physics laws, with tolerances from the integrator's error.
 
-One frame (SPEC "Dynamics of one frame"): ``v += g dt`` (semi-implicit Euler), the multi-bounce
+One frame (README "What it models"): ``v += g dt`` (semi-implicit Euler), the multi-bounce
 move of ``v dt``, the speed reset from the per-sphere energy ``E`` and the orientation step. The
 energy is that of the velocity at the frame's end, ``u = v + g dt / 2`` (``v`` is semi-implicit
 Euler's step velocity), which semi-implicit Euler keeps exactly in free flight. Expected
@@ -270,7 +270,7 @@ def test_ball_thrown_at_a_wall_mirrors(precision, device):
 
 def test_sliding_on_a_floor_spins_up_about_n_cross_v():
     """Spheres (r = 0.1, m = 1) sliding along +x on a floor (n = +y), k_f = 2 kg/s, clamp
-    5 rad/s. Each frame's support contact applies the SPEC torque: with Rot = (0, 0, w) and
+    5 rad/s. Each frame's support contact applies the friction torque: with Rot = (0, 0, w) and
     OC = -r n = (0, -r, 0), Rot x OC = (w r, 0, 0), so v_t,rel = (vx + w r, 0, 0) and
     dL = dt OC x (-k_f v_t,rel) = (0, 0, -dt r k_f (vx + w r)). From L = 0 the spin grows
     along -z = n x v / |v| (towards rolling), w -> -vx / r geometrically (ratio
@@ -283,7 +283,7 @@ def test_sliding_on_a_floor_spins_up_about_n_cross_v():
                      radius=r, mass=m)
     sim = ws.Simulator(scene, swarm)
     assert sim.spin
-    w_ref = np.zeros(2)  # float64 iteration of the SPEC recursion, with the simulated vx
+    w_ref = np.zeros(2)  # float64 iteration of the spin recursion, with the simulated vx
     eps = EPS["float32"]
     orientations = []
     for frame in range(600):
@@ -331,8 +331,8 @@ def closed_room_swarm(n, seed, half=1.0, r=0.05):
 @pytest.mark.parametrize("precision,frames", [("float32", 10_000), ("float64", 2_000)])
 def test_energy_kept_in_a_closed_room(precision, frames):
     """Closed room, k = 1, correction on: the per-sphere energy is a constant of the motion
-    (SPEC), and the mechanical energy 1/2 m |v|^2 - m g . (p - origin) of the state equals it
-    to rounding at every checkpoint: within ROUND_ULPS ulps of the energy scale
+    (README "What it models"), and the mechanical energy 1/2 m |v|^2 - m g . (p - origin) of
+    the state equals it to rounding at every checkpoint: within ROUND_ULPS ulps of the energy scale
     1/2 m v_max^2 + m g (room height), never more (no gain), whatever the number of frames."""
     half = 1.0
     swarm, mass = closed_room_swarm(64, seed=3, half=half)

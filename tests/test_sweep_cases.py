@@ -1,4 +1,4 @@
-"""Named cases for the single-box sweep (sheet method 1), each with an analytic answer.
+"""Named cases for the single-box sweep, each with an analytic answer.
 
 Most cases are built backwards (Jolt's habit): pick the contact centre ``P`` on the Minkowski
 surface with its outward normal ``n``, a direction ``d`` with ``d . n < 0`` and a fraction ``t``,
@@ -153,7 +153,7 @@ def test_start_in_contact_moving_in_is_hit_at_zero(start, velocity, normal, prec
 
 def test_sharp_box_edge_sliding_path_is_a_face_hit():
     """A path on the top plane of a sharp box crosses the -x face plane at its top edge: the
-    closed box is touched there, the motion goes into that face, so it is a hit (the sheet's
+    closed box is touched there, the motion goes into that face, so it is a hit (the
     OBB entry) with the face normal."""
     c = _one([-4.0, 0.5, 0.0], [4.0, 0.0, 0.0], 0.0, SHARP)
     assert c.hit[0] and c.t[0] == pytest.approx(0.75)

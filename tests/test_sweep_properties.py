@@ -1,7 +1,7 @@
 """Properties of the sweep over random rounded boxes and segments (hypothesis).
 
 Each example draws one box and a batch of segments aimed around it, runs the kernels once, and
-checks the SPEC's invariants with the float64 signed distance of ``RoundedBoxes``, which is an
+checks the sweep's invariants with the float64 signed distance of ``RoundedBoxes``, which is an
 independent formula (distance to the core box minus the radius), not the kernels' method.
 """
 

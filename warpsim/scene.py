@@ -13,7 +13,8 @@ DEFAULT_GRAVITY = (0.0, -9.81, 0.0)
 
 
 class Scene:
-    """Obstacles and physics settings (validated on construction; see SPEC "Dynamics").
+    """Obstacles and physics settings (validated on construction; the dynamics of a frame are
+    described in :class:`warpsim.Simulator` and the README's "What it models").
 
     Args:
         boxes: the static obstacles.
@@ -33,8 +34,8 @@ class Scene:
         frames: default number of frames to simulate, >= 1.
         max_bounces: default cap of contacts per sphere per frame, in
             ``[1, warpsim.validation.MAX_BOUNCES]``.
-        motion: default motion model: ``"linear"`` (the sheet's: each frame's path is the
-            chord ``A -> A + v dt``) or ``"ballistic"`` (the exact parabola of each flight).
+        motion: default motion model: ``"linear"`` (each frame's path is the chord
+            ``A -> A + v dt``) or ``"ballistic"`` (the exact parabola of each flight).
         source: the file the scene was read from, if any.
 
     Raises:

@@ -24,8 +24,6 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 USD_SUFFIXES = (".usdc", ".usda")
 EVENTS_SUFFIXES = (".parquet",)
-#: Energy floors below this [J] are treated as zero when scaling relative energy figures.
-ENERGY_SCALE_FLOOR = 1e-30
 #: Default for ``run --velocities``: off. Measured (benchmarks/usd_write.py): velocities add
 #: 12 B per sphere-frame in .usdc (24 B with spin) to the 12 B of a non-spinning sphere's
 #: position, doubling the per-frame data of most bundled scenes (the default room run, 400
@@ -166,33 +164,24 @@ def _cmd_scenes(_args) -> int:
     return 0
 
 
-def _energy_scale(sim) -> tuple[np.ndarray, np.ndarray]:
-    """Initial energies (N,) and each sphere's energy above the lowest point of the scene (N,),
-    the scale of relative energy figures (near 0: kept; 1: all of it) [J]."""
-    scene = sim.scene
-    g = scene.gravity
-    if len(scene.boxes) and np.any(g):
-        corners = scene.boxes.center + scene.boxes.bounding_radius()[:, None] * np.sign(g)
-        floor = corners[np.argmin(corners @ -g)]
-    else:
-        floor = sim.energy_origin
-    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
-    floor_potential = -sim.mass * ((floor - sim.energy_origin) @ g)
-    return e0, np.maximum(e0 - floor_potential, ENERGY_SCALE_FLOOR)
+def energy_line(sim, swarm, state) -> str:
+    """The summary's energy line, on the scale of :mod:`warpsim.energy`: the largest drift
+    (elastic scenes), or what the contacts took (``energy_retention < 1``: losing energy is the
+    model, not an error)."""
+    from ..energy import energy_scale, lowest_potential
 
-
-def energy_line(sim, state) -> str:
-    """The summary's energy line: the largest drift (elastic scenes), or what the contacts took
-    (``energy_retention < 1``: losing energy is the model, not an error)."""
-    e0, scale = _energy_scale(sim)
-    if not len(e0):
+    if not len(swarm):
         return "energy: no spheres"
-    energy = sim.mechanical_energy(state)
-    if sim.scene.energy_retention < 1.0:
+    scene = sim.scene
+    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
+    energy = np.asarray(sim.mechanical_energy(state), dtype=np.float64)
+    lowest = lowest_potential(scene.gravity, scene.boxes, swarm.position, sim.energy_origin)
+    scale = energy_scale(e0, sim.mass, lowest)
+    if scene.energy_retention < 1.0:
         lost = float(np.sum(e0 - energy) / np.sum(scale))
         gained = float(np.max((energy - e0) / scale))
-        line = (f"energy lost at contacts: {100.0 * lost:.1f}% of the energy above the lowest "
-                f"obstacle (energy_retention = {sim.scene.energy_retention:g})")
+        line = (f"energy lost at contacts: {100.0 * lost:.1f}% of the energy above the scene's "
+                f"lowest point (energy_retention = {scene.energy_retention:g})")
         return line + (f"; largest gain {gained:.2e} (relative)" if gained > 0.0 else "")
     drift = float(np.max(np.abs(energy - e0) / scale))
     return f"energy drift: {drift:.2e} (largest per sphere, relative)"
@@ -336,7 +325,7 @@ def _cmd_run(args) -> int:
           f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
     print(f"bounces: {stats.bounces:,} ({stats.bounces / max(stats.sphere_frames, 1):.3f} per "
           f"sphere-frame); capped: {stats.capped:,} sphere-frames, {stats.capped_spheres} spheres")
-    print(energy_line(sim, state))
+    print(energy_line(sim, swarm, state))
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {len(traj)} frames "
           f"{int(traj.frame[0])}..{int(traj.frame[-1])}, {n_written} spheres)")
     if args.events is not None:
