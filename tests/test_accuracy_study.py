@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import closed_room
+from helpers import closed_room, with_velocity
 
 import warpsim as ws
 from warpsim.analysis import accuracy, error_report, reference
@@ -36,7 +36,7 @@ def measured_order(scene, swarm, rates) -> tuple[float, list[float]]:
         dt = 1.0 / rate
         times = np.arange(rate + 1) * dt
         start = error_report.initial_velocity(swarm, dt, g, "linear")
-        ref = reference.simulate(scene, error_report._with_velocity(swarm, start), 1.0, times)
+        ref = reference.simulate(scene, with_velocity(swarm, start), 1.0, times)
         bounced = np.unique(ref.events.bounces().sphere)
         assert len(bounced) == len(ref.incomplete)  # every sphere bounces
         sim = ws.Simulator(scene, swarm, dt=dt, precision="float64")

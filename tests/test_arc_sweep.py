@@ -19,7 +19,7 @@ from arc_reference import (
     arc_point,
     signed_distance,
 )
-from conftest import shaped_half_extents
+from helpers import shaped_half_extents
 
 import warpsim as ws
 from warpsim.kernels.nearest import BOUNDS_PAD_REL, REJECT_SLACK, nearest_funcs

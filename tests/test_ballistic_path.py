@@ -13,7 +13,7 @@ from functools import cache
 import numpy as np
 import pytest
 import warp as wp
-from conftest import closed_room
+from helpers import closed_room
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_arc_sweep import device_boxes

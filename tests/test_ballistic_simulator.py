@@ -126,13 +126,13 @@ def test_energy_is_kept_without_any_correction(device, precision):
     assert drift.min() >= -1e-3
 
 
-def test_broad_phases_and_workers_are_bit_identical():
+def test_broad_phases_and_workers_are_bit_identical(device):
     scene = ws.Scene.load("galton")
     swarm = scene.spawn(n=500, seed=3)
     states = {}
     for bp, workers in (("brute", 1), ("bvh", 2), ("grid", 2), ("auto", 1)):
         sim = ws.Simulator(scene, swarm, motion="ballistic", broad_phase=bp, workers=workers,
-                           device="cpu")
+                           device=device)
         sim.step(45)
         states[bp] = (sim.state().position, sim.stats.bounces)
     ref = states["brute"]
@@ -141,19 +141,19 @@ def test_broad_phases_and_workers_are_bit_identical():
         assert bounces == ref[1], bp
 
 
-def test_motion_is_a_scene_setting_and_a_simulator_choice(tmp_path):
+def test_motion_is_a_scene_setting_and_a_simulator_choice(device, tmp_path):
     text = ws.Scene.load("wedge").source
     scene_text = open(text).read()
     path = tmp_path / "wedge.toml"
     path.write_text(scene_text.replace("[simulation]", '[simulation]\nmotion = "ballistic"'))
     scene = ws.Scene.load(path)
     assert scene.motion == "ballistic" and scene.energy_correction is False
-    sim = ws.Simulator(scene, scene.spawn(n=10, seed=0), device="cpu")
+    sim = ws.Simulator(scene, scene.spawn(n=10, seed=0), device=device)
     assert sim.motion == "ballistic"
     assert ws.Simulator(scene, scene.spawn(n=10, seed=0), motion="linear",
-                        device="cpu").energy_correction is True
+                        device=device).energy_correction is True
     with pytest.raises(ValueError, match="motion must be one of"):
-        ws.Simulator(scene, scene.spawn(n=10, seed=0), motion="parabola", device="cpu")
+        ws.Simulator(scene, scene.spawn(n=10, seed=0), motion="parabola", device=device)
     bad = tmp_path / "bad.toml"
     bad.write_text(scene_text.replace("[simulation]", '[simulation]\nmotion = "exact"'))
     with pytest.raises(ValueError, match="simulation.motion must be one of"):

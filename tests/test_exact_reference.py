@@ -6,7 +6,7 @@ points built backwards from a chosen contact), never from the code under test.
 
 import numpy as np
 import pytest
-from conftest import closed_room
+from helpers import closed_room
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import shaped_half_extents
+from helpers import shaped_half_extents
 
 import warpsim as ws
 from warpsim import feasibility, obstacles
