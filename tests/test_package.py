@@ -5,8 +5,11 @@ importable from ``warpsim`` itself."""
 import ast
 import importlib
 import pkgutil
+import re
 import tomllib
 from pathlib import Path
+
+import pytest
 
 import warpsim
 
@@ -119,3 +122,19 @@ def test_every_public_name_is_importable_from_warpsim():
     for name in warpsim.__all__:
         assert getattr(warpsim, name) is not None, name
     assert len(set(warpsim.__all__)) == len(warpsim.__all__)
+
+
+def test_every_name_the_readme_uses_is_public():
+    """``ws.X`` and ``warpsim.X`` in the README: a name of ``warpsim.__all__`` or one of the
+    package's modules (used as ``warpsim.module.name``), never a private path."""
+    readme = ROOT / "README.md"
+    if not readme.is_file():
+        pytest.skip("README.md not present (installed package)")
+    text = readme.read_text(encoding="utf-8")
+    modules = {name.split(".")[1] for name in package_modules() if name.count(".") >= 1}
+    used = set(re.findall(r"\b(?:ws|warpsim)\.([A-Za-z_]\w*)", text))
+    for name in used:
+        assert not name.startswith("_"), name
+        assert name in warpsim.__all__ or name in modules, f"warpsim.{name} is not public"
+    for name in ("PrecisionWarning", "ContactEvents", "ContactKind", "Motion", "BroadPhase"):
+        assert name in warpsim.__all__

@@ -25,11 +25,7 @@ import warp as wp
 
 from ..export.files import write_json
 from ..machine import machine
-from ..validation import PRECISIONS
-from ..vocabulary import BroadPhase, Motion
-
-BROAD_PHASES = tuple(BroadPhase)
-MOTIONS = tuple(Motion)
+from .options import add_simulation_options
 
 PROG = "warpsim bench"
 DESCRIPTION = ("The throughput of one scene on this machine: kernel build timed apart, one "
@@ -57,19 +53,8 @@ def _positive_int(text: str) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The options of ``warpsim bench``."""
     parser = _Parser(prog=PROG, description=DESCRIPTION)
-    parser.add_argument("scene", help="bundled scene name (see 'warpsim scenes') or a .toml path")
-    parser.add_argument("-n", "--count", type=_positive_int,
-                        help="number of spheres (default: the scene emitter's count)")
-    parser.add_argument("--frames", type=_positive_int,
-                        help="timed frames (default: the scene's frames)")
-    parser.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's)")
-    parser.add_argument("--precision", default="float32", choices=PRECISIONS)
-    parser.add_argument("--workers", type=_positive_int,
-                        help="CPU threads stepping the swarm (default: every core)")
-    parser.add_argument("--broad-phase", default="auto", choices=BROAD_PHASES,
-                        help="how each sphere finds its candidate boxes (default auto)")
-    parser.add_argument("--motion", choices=MOTIONS,
-                        help="motion model between contacts (default: the Simulator's)")
+    add_simulation_options(parser, integer=_positive_int,
+                           frames_help="timed frames (default: the scene's frames)")
     parser.add_argument("--json", metavar="PATH", help="also write the figures to this JSON file")
     return parser
 

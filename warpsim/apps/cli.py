@@ -15,8 +15,7 @@ import sys
 
 import numpy as np
 
-from ..validation import PRECISIONS
-from ..vocabulary import BroadPhase, Motion
+from .options import add_simulation_options
 from .startup import check_device, init_warp
 
 EXIT_ERROR = 1
@@ -88,9 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="simulate a scene and write a USD animation")
-    run.add_argument("scene", help="bundled scene name (see 'warpsim scenes') or a .toml path")
-    run.add_argument("-n", "--count", type=int, help="number of spheres (default: the scene's)")
-    run.add_argument("--frames", type=int, help="frames to simulate (default: the scene's)")
+    add_simulation_options(run)
     run.add_argument("--start", type=int, default=0,
                      help="first frame written (the run still starts at frame 0)")
     run.add_argument("--end", type=int,
@@ -99,14 +96,6 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--dt", type=float, help="time step [s] (default: the scene's)")
     run.add_argument("--seed", type=int, help="emitter seed (default: the scene's)")
     run.add_argument("--max-bounces", type=int, help="contacts per sphere per frame")
-    run.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's)")
-    run.add_argument("--precision", default="float32", choices=PRECISIONS)
-    run.add_argument("--broad-phase", default=BroadPhase.AUTO, choices=tuple(BroadPhase),
-                     help="candidate boxes per sphere: every box, a BVH or a grid, or chosen "
-                          "from a cost model (same results)")
-    run.add_argument("--motion", choices=tuple(Motion),
-                     help="path within a frame: the chord or the exact parabola")
-    run.add_argument("--workers", type=int, help="CPU threads stepping the swarm")
     run.add_argument("-o", "--output", help="output .usdc or .usda (default: SCENE.usdc)")
     run.add_argument("--every", type=int, default=1, help="record one frame in EVERY")
     run.add_argument("--velocities", action=argparse.BooleanOptionalAction,
