@@ -43,6 +43,7 @@ def test_no_contact_is_the_parabola(device, precision):
     np.testing.assert_allclose(c.new_velocity[0], [1.0, 2.0 - 9.81 * 0.25, 0.0], rtol=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(4))
 def test_random_arcs_against_the_reference(device, seed):
     """Random rounded boxes, plates and sticks, random arcs: contact time and normal as the

@@ -36,6 +36,7 @@ def exact():
     return reference.simulate(scene, swarm, 0.5, times=[0.5])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", [1 / 30, 1 / 240])
 def test_positions_agree_with_the_exact_motion_at_any_step(device, exact, precision, dt):
     scene, swarm = tilted_plates(), drop_swarm()
@@ -72,6 +73,7 @@ def test_first_contact_times_agree_to_float_precision(device, exact, precision):
     assert checked >= 24
 
 
+@pytest.mark.slow
 def test_final_positions_do_not_depend_on_the_step(device, precision):
     scene, swarm = tilted_plates(), drop_swarm(n=32, seed=7)
     finals = []
@@ -84,6 +86,7 @@ def test_final_positions_do_not_depend_on_the_step(device, precision):
     assert spread <= (1e-9 if precision == "float64" else 2e-4), spread
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", [1 / 60, 1 / 10])
 def test_free_fall_is_the_parabola_and_the_floor_bounce_is_exact(device, precision, dt):
     """A ball dropped from h onto a floor: the bounce times are t_k = t0 (1 + 2k), and the
@@ -126,6 +129,7 @@ def test_energy_is_kept_without_any_correction(device, precision):
     assert drift.min() >= -1e-3
 
 
+@pytest.mark.slow
 def test_broad_phases_and_workers_are_bit_identical(device):
     scene = ws.Scene.load("galton")
     swarm = scene.spawn(n=500, seed=3)

@@ -82,6 +82,7 @@ def test_main_prints_and_writes_json(tmp_path, capsys):
     assert not list(out.parent.glob(".*.tmp"))  # the temporary file was renamed
 
 
+@pytest.mark.slow
 def test_bounce_count_is_exact_on_a_corridor(tmp_path, capsys):
     """Warm-up frame 1, timed frames 2-9: contacts in frames 2 and 6, 2 per sphere in 8 frames."""
     scene = tmp_path / "corridor.toml"
@@ -144,6 +145,7 @@ def console(*args):
                           timeout=300, cwd=Path(__file__).resolve().parent)
 
 
+@pytest.mark.slow
 def test_console_script(tmp_path):
     out = tmp_path / "cli.json"
     proc = console("wedge", "-n", 30, "--frames", 4, "--workers", 2, "--json", out)

@@ -139,6 +139,7 @@ def test_path_in_simple_scenes(case, precision, device):
     assert b.position.dtype == np.dtype(precision)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("precision", ["float32", "float64"])
 @settings(max_examples=150, deadline=None)
@@ -291,6 +292,7 @@ def test_spin_two_contacts_in_one_frame():
     np.testing.assert_allclose(b.position[0], (0.5, 1.0, 0.5), rtol=0, atol=1e-6)
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(q=st.tuples(*[st.floats(-1.0, 1.0)] * 4),
        local_d=st.tuples(st.floats(-2.0, 2.0), st.floats(0.1, 2.0), st.floats(-2.0, 2.0)),
@@ -373,6 +375,7 @@ def test_energy_retention_compounds_over_contacts():
 # -- thin plates at high speed ------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("half_thickness", [0.0, 1e-3])
 @pytest.mark.parametrize("speed", [600.0, 5000.0])
 def test_thin_plate_at_high_speed_is_never_crossed(device, speed, half_thickness):

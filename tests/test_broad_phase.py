@@ -114,6 +114,7 @@ def test_bounce_bvh_is_bit_identical(device):
     assert brute.bounces.max() >= 2
 
 
+@pytest.mark.slow
 def test_simulator_galton_bvh_is_bit_identical(device):
     scene = ws.Scene.load("galton")
     assert len(scene.boxes) >= BVH_MIN_BOXES

@@ -36,6 +36,7 @@ def test_free_flight_has_no_error_but_rounding(device):
     assert rep.settings["convention_offset_m_per_s"] == pytest.approx(0.5 * G / 60)
 
 
+@pytest.mark.slow
 def test_floor_bounce_contact_time_and_error_figures(device):
     """A ball dropped from h: contact at sqrt(2 h / g); the linear model's chord sweep finds it
     within a frame; every figure is present, finite and JSON-ready."""
@@ -71,6 +72,7 @@ def test_floor_bounce_contact_time_and_error_figures(device):
     json.dumps(rep.to_dict(), allow_nan=False)
 
 
+@pytest.mark.slow
 def test_lossy_run_is_judged_by_energy_against_the_reference(device):
     h, r = 1.0, 0.05
     scene = floor_scene(energy_retention=0.7)
@@ -119,6 +121,7 @@ def test_contacts_from_frames_of_a_linear_bounce():
     np.testing.assert_allclose(found.fraction, [tau / dt], atol=1e-12)
 
 
+@pytest.mark.slow
 def test_bad_arguments(device):
     scene = floor_scene()
     swarm = ws.Swarm(position=[[0.0, 1.0, 0.0]], velocity=[[0.0, 0.0, 0.0]])
@@ -132,6 +135,7 @@ def test_bad_arguments(device):
         error_report.compare(traj, scene, swarm)
 
 
+@pytest.mark.slow
 def test_ballistic_run_agrees_with_the_reference_at_every_step_size(device):
     """The exact-arc model is the reference's physics per frame: in float64 its positions after
     0.5 s in the standard room agree to far below a micrometre at dt = 1/30 s and 1/240 s

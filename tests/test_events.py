@@ -14,6 +14,7 @@ G = 9.81
 DT = 1.0 / 60.0
 
 
+@pytest.mark.slow
 def test_drop_on_a_floor_matches_the_scheme(device, precision):
     r, h0 = 0.1, 1.0  # centre starts h0 above the contact height
     floor = ws.RoundedBoxes(center=[[0, -0.5, 0]], half_extents=[[10, 0.5, 10]])
@@ -64,6 +65,7 @@ def test_into_a_corner_hits_both_walls_in_order(device, precision):
     assert ev.frame.tolist() == [1, 1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene_name", ["room", "thin-walls", "wedge"])
 def test_event_totals_equal_the_counters_and_change_nothing(device, scene_name):
     scene = ws.Scene.load(scene_name)
@@ -93,6 +95,7 @@ def test_overflow_is_counted_never_silent(device):
     assert len(ev) <= 50 * 2  # two launches at most fill their buffers
 
 
+@pytest.mark.slow
 def test_the_kernels_write_the_contact_kinds_of_the_vocabulary(device, precision):
     """A dropped ball's first contact is a BOUNCE; once it lies on the floor every contact is a
     SUPPORT: the kernels' 0/1 in the event buffer are :class:`warpsim.ContactKind`'s values."""

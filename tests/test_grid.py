@@ -42,6 +42,7 @@ def same(a, b, fields):
         assert np.array_equal(np.asarray(x).view(np.uint8), np.asarray(y).view(np.uint8)), f
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k", [1, 7, 60, 500, 10_000])
 @pytest.mark.parametrize("offset", [0.0, 1e4])
 def test_bounce_grid_is_bit_identical(device, k, offset, precision):
@@ -88,6 +89,7 @@ def test_spheres_on_cell_borders_and_resting(device):
     assert sims["brute"].stats.bounces == sims["grid"].stats.bounces > 0
 
 
+@pytest.mark.slow
 def test_simulator_grid_matches_brute_in_bundled_scenes(device, precision):
     for name in ("room", "galton", "staircase", "pinball"):
         scene = ws.Scene.load(name)
@@ -103,6 +105,7 @@ def test_simulator_grid_matches_brute_in_bundled_scenes(device, precision):
         assert brute.stats.bounces == grid.stats.bounces
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k", [3, 40, 300])
 def test_cells_list_every_box_near_them(k):
     """The host invariant: cell c lists box b exactly when b's reject bounds meet c's domain

@@ -33,6 +33,7 @@ def plate_side(position, center, rotation, axis=0) -> np.ndarray:
 
 # -- 1. a point never crosses a plate ---------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("radius", [0.0, 1e-9, 1e-6])
 @pytest.mark.parametrize("offset", [0.0, 1e3])
 def test_points_never_cross_a_plate(device, precision, radius, offset):
@@ -78,6 +79,7 @@ def test_the_reported_case_stays_in_front(device):
         assert out.velocity[0, 0] == -120.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("radius", [0.0, 1e-9])
 @pytest.mark.parametrize("speed", [5.0, 1e3, 1e6])
 def test_closed_room_of_plates_holds_every_point(device, precision, radius, speed):
@@ -120,6 +122,7 @@ def test_thin_walls_with_points_keep_their_cells(device, precision):
 
 # -- 2. sideways speed on a flat frictionless floor --------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("correction", [True, False])
 @pytest.mark.parametrize("height,vx", [(0.5, 1.0), (0.01, 0.5)])
 def test_floor_keeps_horizontal_speed_and_bounce_height(device, precision, correction, height, vx):
@@ -189,6 +192,7 @@ def test_no_energy_gain_released_near_a_floor(device, precision, dt):
     assert (sim.state().position[:, 1] <= r + gaps + 9.81 * dt * dt).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", [1 / 60, 0.1, 1.0])
 def test_no_energy_gain_at_large_steps(device, precision, dt):
     """A ball dropped from 1 m never climbs above its energy height, at any step."""

@@ -104,11 +104,13 @@ def test_the_walk_sees_every_part_of_the_package():
     assert "warpsim.analysis.reference" in graph["warpsim.analysis.error_report"]
 
 
+@pytest.mark.slow
 def test_no_import_circle_in_the_package():
     cycle = find_cycle(import_graph())
     assert cycle is None, "import circle: " + " -> ".join(cycle)
 
 
+@pytest.mark.slow
 def test_nothing_imports_the_applications():
     graph = import_graph()
     for name, targets in graph.items():

@@ -180,6 +180,7 @@ def test_reference_error_summaries():
 coord = st.floats(-2.0, 2.0, allow_nan=False)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(st.tuples(coord, coord, coord),
        st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0), st.floats(0.0, 1.0)))
@@ -267,6 +268,7 @@ def test_warpsim_keeps_every_sphere_in_the_room(key, speed):
 
 # -- the command ----------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_command_writes_table_json_and_plot(tmp_path, capsys):
     pytest.importorskip("matplotlib")
     from benchmarks.peers.run import main

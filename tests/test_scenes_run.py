@@ -8,6 +8,7 @@ import warpsim as ws
 SCENES = [name for name, _ in ws.list_scenes()]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SCENES)
 def test_bundled_scene_runs(device, name):
     """A few frames with each scene's own settings (its kernel variant): finite, nobody inside

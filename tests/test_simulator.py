@@ -269,6 +269,7 @@ def test_ball_thrown_at_a_wall_mirrors(precision, device):
 # -- friction spin -----------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_sliding_on_a_floor_spins_up_about_n_cross_v(device):
     """Spheres (r = 0.1, m = 1) sliding along +x on a floor (n = +y), k_f = 2 kg/s, clamp
     5 rad/s. Each frame's support contact applies the friction torque: with Rot = (0, 0, w) and
@@ -416,6 +417,7 @@ def plates_in_a_room(rng, half, half_thickness, count=6):
     return ws.RoundedBoxes.concatenate([closed_room(half), plates])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("half_thickness", [0.0, 1e-3])
 @pytest.mark.parametrize("speed", [60.0, 600.0])
 def test_fast_spheres_among_thin_rotated_plates(device, speed, half_thickness):
@@ -439,6 +441,7 @@ def test_fast_spheres_among_thin_rotated_plates(device, speed, half_thickness):
     assert np.isfinite(sim.state().velocity).all()
 
 
+@pytest.mark.slow
 def test_narrow_wedge_caps_and_never_lets_a_sphere_in(device):
     """Two zero-thickness plates 2 m long meeting at the origin, each 5 degrees from the
     vertical (a V); spheres (r = 5 cm) dropped in from 1.5 m. Deep in the V the gap between the
@@ -473,6 +476,7 @@ def test_narrow_wedge_caps_and_never_lets_a_sphere_in(device):
         1.0, 0.0, 3.0, "float32"))
 
 
+@pytest.mark.slow
 def test_random_scenes_with_losses_settle_without_entering_boxes(device):
     """Random rounded boxes in a room, k = 1/2, 1200 frames: spheres come to rest on faces,
     edges and in creases. At every checkpoint: no NaN, nobody inside, and the per-sphere
@@ -514,6 +518,7 @@ def energy_gain_tolerance(mass, speed, height, precision):
     return rounding + 1.5 * mass * G * G_DT2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("device", DEVICES)
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), count=st.integers(1, 5),
@@ -556,6 +561,7 @@ def state_digest(state) -> str:
     return h.hexdigest()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("friction", [0.0, 0.5], ids=["no-spin", "spin"])
 def test_same_inputs_give_bit_identical_states(friction, device):
     """Two simulators built from the same inputs: bit-identical states after 200 frames of a

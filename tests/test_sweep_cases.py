@@ -93,6 +93,7 @@ HIT_CASES += [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", HIT_CASES, ids=[c[0] for c in HIT_CASES])
 def test_hit_built_backwards(case, precision, device):
     name, box, r, lp, ln, d, t = case

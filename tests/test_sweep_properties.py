@@ -42,6 +42,7 @@ def _sd(box, pts):
     return box.as_boxes().signed_distance(pts)[:, 0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("device", DEVICES)
 @settings(max_examples=80, deadline=None)
 @given(case=boxes_and_segments(), precision=st.sampled_from(["float32", "float64"]))
@@ -115,6 +116,7 @@ def group_scenes(draw):
     return boxes, a, d
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("device", DEVICES)
 @settings(max_examples=40, deadline=None)
 @given(scene=group_scenes(), precision=st.sampled_from(["float32", "float64"]))

@@ -55,6 +55,7 @@ def _decided(box, r, a, d, ref, band):
     return ok
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["box", "plate", "stick", "point"])
 def test_kernels_match_reference(device, kind, precision):
     band = BANDS[precision]
@@ -84,6 +85,7 @@ def test_kernels_match_reference(device, kind, precision):
     assert decided_hits > 0.2 * 12 * 400
 
 
+@pytest.mark.slow
 def test_nearest_of_group_matches_reference(device):
     """collide_boxes over overlapping rotated boxes against the float64 reference's minimum."""
     from reference import nearest_reference_batch
