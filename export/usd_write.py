@@ -436,7 +436,7 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
                 layer.SetTimeSample(paths["angularVelocities"], time, vec3(degrees))
 
 
-def _export_layer(layer: Sdf.Layer, path: Path) -> None:
+def export_layer(layer: Sdf.Layer, path: Path) -> None:
     """Write ``layer`` to ``path``, in the format named by its extension."""
     try:
         ok = layer.Export(str(path))
@@ -533,7 +533,7 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
     _author_sphere_prototype(stage, light, dark)
 
     with atomic_output(path) as tmp:
-        _export_layer(stage.GetRootLayer(), tmp)
+        export_layer(stage.GetRootLayer(), tmp)
     return path
 
 

@@ -367,7 +367,7 @@ def partial_then_fail(layer, path):
 
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_failed_write_leaves_nothing(tmp_path, monkeypatch, fmt):
-    monkeypatch.setattr(usd_module, "_export_layer", partial_then_fail)
+    monkeypatch.setattr(usd_module, "export_layer", partial_then_fail)
     with pytest.raises(OSError, match="disk full"):
         write_usd(tmp_path / f"anim.{fmt}", make_scene(), make_trajectory())
     assert list(tmp_path.iterdir()) == []
@@ -377,7 +377,7 @@ def test_failed_write_keeps_the_existing_file(tmp_path, monkeypatch):
     path = tmp_path / "anim.usdc"
     write_usd(path, None, make_trajectory(seed=1))
     before = path.read_bytes()
-    monkeypatch.setattr(usd_module, "_export_layer", partial_then_fail)
+    monkeypatch.setattr(usd_module, "export_layer", partial_then_fail)
     with pytest.raises(OSError):
         write_usd(path, None, make_trajectory(seed=2))
     assert path.read_bytes() == before
