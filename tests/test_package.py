@@ -140,3 +140,18 @@ def test_every_name_the_readme_uses_is_public():
         assert name in warpsim.__all__ or name in modules, f"warpsim.{name} is not public"
     for name in ("PrecisionWarning", "ContactEvents", "ContactKind", "Motion", "BroadPhase"):
         assert name in warpsim.__all__
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("module", ["warpsim", "warpsim.apps.cli", "warpsim.apps.bench",
+                                    "warpsim.analysis.accuracy"])
+def test_python_dash_m_entry_points(module):
+    """Each ``python -m`` entry point starts, without runpy's warning about a module its
+    package imported first."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", module, "--help"],
+                         capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("usage: warpsim")
