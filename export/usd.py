@@ -459,7 +459,9 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
         path: output file; ``.usda`` (text) or ``.usdc`` (binary), any case. Its folder must
             exist.
         scene: the :class:`warpsim.Scene` simulated (its boxes are written once, never per frame),
-            or its :class:`warpsim.RoundedBoxes`, or None to write the spheres alone.
+            or its :class:`warpsim.RoundedBoxes`, or None to write the spheres alone. Boxes read
+            from a USD stage are not written: the result composes over that stage
+            (:mod:`warpsim.export.compose`).
         trajectory: the recorded frames; time codes are its integer ``frame`` indices.
         stride: keep every ``stride``-th recorded frame (rows 0, stride, 2 stride, ...) and the
             last one, as ``Simulator.run(every=...)`` does; >= 1.
@@ -493,6 +495,9 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
     frames = np.asarray(trajectory.frame, dtype=np.int64)[rows]
     dt = float(trajectory.dt)
     boxes = None if scene is None else (scene if isinstance(scene, RoundedBoxes) else scene.boxes)
+    over = getattr(boxes, "stage", None)  # boxes read from a USD stage: compose over it
+    if over is not None:  # (export/compose.py), the set drawing them
+        boxes = None
 
     if warn:
         q = np.asarray(trajectory.orientation)
@@ -531,8 +536,13 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
     _author_spheres(stage, trajectory, rows, idx, velocities)
     _author_sphere_prototype(stage, light, dark)
 
+    layer = stage.GetRootLayer()
+    if over is not None:
+        from .compose import over_set
+
+        layer = over_set(layer, over, path)
     with atomic_output(path) as tmp:
-        _export_layer(stage.GetRootLayer(), tmp)
+        _export_layer(layer, tmp)
     return path
 
 

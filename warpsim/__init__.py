@@ -35,6 +35,7 @@ __all__ = [
     "Swarm",
     "Trajectory",
     "list_scenes",
+    "obstacles_from_usd",
 ]
 
 __version__ = "0.1.0"
@@ -45,6 +46,10 @@ def __getattr__(name):
         import importlib
 
         return importlib.import_module(".export", __name__)
+    if name == "obstacles_from_usd":  # lazy: reading a stage needs pxr
+        from .export.stage_in import obstacles_from_usd
+
+        return obstacles_from_usd
     if name in ("reference", "error_report", "accuracy", "distributed"):  # lazy: optional parts
         import importlib
 
