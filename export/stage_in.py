@@ -56,6 +56,16 @@ POINT_TOL = 1e-5
 """Largest distance, relative to the box's longest edge, between a mesh point and the corner of
 the box its edges span (float32 points, as for ``ORTHOGONAL_TOL``)."""
 
+POINT_ROUNDING = 4.0 * 2.0**-24
+"""Mesh points are float32: each coordinate is off by up to ``2^-24`` of the largest one, so a
+small box far from its mesh's origin has edges off their right angles by up to about this times
+``max |point| / shortest edge``; both tolerances above grow by that much."""
+
+UNIT_SCALE = 8.0 * np.finfo(np.float64).eps
+"""A transform's scale within this of 1 is a rigid motion's (a rotation matrix made from a unit
+quaternion has column norms 1 to a few ulp): taken as exactly 1, so boxes that warpsim wrote read
+back with their half extents to the bit."""
+
 _SIGNS = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)])  # corner k's bits
 
 
@@ -293,19 +303,12 @@ def _box_of_mesh(mesh: UsdGeom.Mesh, time: Usd.TimeCode):
     neighbours = [[b if a == k else a for a, b in edges if k in (a, b)] for k in range(8)]
     if len(edges) != 12 or any(len(n) != 3 for n in neighbours):
         return None
+    if not np.isfinite(p).all():
+        return None
     e = p[neighbours[0]] - p[0]  # (3, 3) rows: the box's edges from corner 0
-    e = e[_nearest_axes(e)]  # the edge nearest local x first, then y, then z
-    length = np.linalg.norm(e, axis=1)
-    if not np.isfinite(p).all() or (length <= 0.0).any():
-        return None
-    unit = e / length[:, None]
-    if np.abs(np.triu(unit @ unit.T, 1)).max() > ORTHOGONAL_TOL:
-        return None
-    corners = p[0] + _SIGNS @ e  # corner k = p0 + sum of the edges its bits select
-    gap = np.linalg.norm(corners[:, None, :] - p[None, :, :], axis=2)
-    match = gap.argmin(axis=1)
-    if (sorted(match.tolist()) != list(range(8))
-            or gap.min(axis=1).max() > POINT_TOL * length.max()):
+    gap = np.linalg.norm((p[0] + _SIGNS @ e)[:, None, :] - p[None, :, :], axis=2)
+    match = gap.argmin(axis=1)  # the point nearest each corner those edges span
+    if sorted(match.tolist()) != list(range(8)):
         return None
     bits = _SIGNS[np.argsort(match)]  # each point's corner bits
     if any(np.abs(bits[a] - bits[b]).sum() != 1 for a, b in edges):
@@ -318,7 +321,28 @@ def _box_of_mesh(mesh: UsdGeom.Mesh, time: Usd.TimeCode):
         sides.add(shared[0])
     if len(sides) != 6:
         return None
-    return p[0] + e.sum(axis=0) / 2.0, unit.T, length / 2.0
+    # Fit the box to all 8 points: each axis is the mean of its 4 parallel edges, made
+    # orthonormal from the longest axis down (a long edge's direction is the best known).
+    edge = np.array([p[bits[:, a] == 1].mean(axis=0) - p[bits[:, a] == 0].mean(axis=0)
+                     for a in range(3)])
+    length = np.linalg.norm(edge, axis=1)
+    if (length <= 0.0).any():
+        return None
+    rounding = POINT_ROUNDING * np.abs(p).max()  # [stage units]
+    cosines = np.abs(np.triu((edge / length[:, None]) @ (edge / length[:, None]).T, 1))
+    if cosines.max() > ORTHOGONAL_TOL + rounding / length.min():
+        return None
+    unit = np.empty((3, 3))
+    for rank, a in enumerate(np.argsort(-length)):  # Gram-Schmidt, longest first
+        v = edge[a] - sum((edge[a] @ unit[b]) * unit[b] for b in np.argsort(-length)[:rank])
+        unit[a] = v / np.linalg.norm(v)
+    center = p.mean(axis=0)
+    half = np.abs((p - center) @ unit.T).mean(axis=0)
+    fitted = center + ((2 * bits - 1) * half) @ unit
+    if np.linalg.norm(fitted - p, axis=1).max() > POINT_TOL * length.max() + 4.0 * rounding:
+        return None
+    order = _nearest_axes(unit)  # the axis nearest local x first, then y, then z
+    return center, unit[order].T, half[order]
 
 
 def _nearest_axes(edges: np.ndarray) -> list[int]:
@@ -344,6 +368,7 @@ def _world_box(matrix: np.ndarray, center: np.ndarray, axes: np.ndarray, half: n
     linear = matrix[:3, :3].T  # column vectors: world = linear @ local + translation
     frame = linear @ axes  # images of the box's axes
     scale = np.linalg.norm(frame, axis=0)
+    scale[np.abs(scale - 1.0) <= UNIT_SCALE] = 1.0
     flat = scale <= ORTHOGONAL_TOL * scale.max()
     if flat.sum() > 1:
         raise ValueError(f"{where}: the transform flattens the box on {flat.sum()} axes")
