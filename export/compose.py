@@ -25,8 +25,6 @@ from pathlib import Path
 
 from pxr import Gf, Sdf, UsdGeom, Vt
 
-from .usd import SPHERES
-
 RESET_XFORM_STACK = "!resetXformStack!"
 
 
@@ -52,7 +50,7 @@ def set_asset_path(set_path, output) -> str:
     return relative if relative.startswith("../") else f"./{relative}"
 
 
-def over_set(layer: Sdf.Layer, stage_set, output) -> Sdf.Layer:
+def over_set(layer: Sdf.Layer, stage_set, output, instancer: str) -> Sdf.Layer:
     """A copy of warpsim's root ``layer`` that composes over ``stage_set``'s stage.
 
     The copy is a layer without a stage (no composition, so the relative sublayer path is never
@@ -62,6 +60,7 @@ def over_set(layer: Sdf.Layer, stage_set, output) -> Sdf.Layer:
         layer: what :func:`warpsim.export.write_usd` built (spheres, materials; no obstacles).
         stage_set: the :class:`warpsim.export.stage_in.StageSet` the obstacles came from.
         output: the file the result is written to (the sublayer path is relative to it).
+        instancer: the path of the sphere instancer in ``layer`` (``/World/Spheres``).
 
     Returns:
         The composed root layer, anonymous.
@@ -76,7 +75,7 @@ def over_set(layer: Sdf.Layer, stage_set, output) -> Sdf.Layer:
     out.subLayerPaths.append(asset)
     out.pseudoRoot.SetInfo(UsdGeom.Tokens.upAxis, stage_set.up_axis)
     out.pseudoRoot.SetInfo(UsdGeom.Tokens.metersPerUnit, float(stage_set.meters_per_unit))
-    spheres = out.GetPrimAtPath(SPHERES)
+    spheres = out.GetPrimAtPath(instancer)
     scale = 1.0 / float(stage_set.meters_per_unit)
     op = Sdf.AttributeSpec(spheres, "xformOp:scale", Sdf.ValueTypeNames.Double3)
     op.default = Gf.Vec3d(scale, scale, scale)

@@ -440,7 +440,7 @@ def test_result_over_the_set_is_refused_and_the_set_is_untouched(set_path, tmp_p
 
 
 def test_cli_run_prints_what_it_read_and_composes(set_path, tmp_path, capsys):
-    from warpsim.cli import main
+    from warpsim.apps.cli import main
 
     scene_path = write_scene(tmp_path)
     sub = tmp_path / "renders"
