@@ -32,6 +32,12 @@ def _open_layer(path) -> Sdf.Layer:
 
 def _stage_of(layer: Sdf.Layer, path, spheres_only: bool = False) -> Usd.Stage:
     try:
+        if layer.subLayerPaths:  # a result composed over a set: its relative sublayer paths
+            # resolve against the file, not against an anonymous copy of it
+            cached = Sdf.Layer.Find(str(path))
+            if cached is not None:
+                cached.Reload()
+            layer = Sdf.Layer.FindOrOpen(str(path))
         if spheres_only:
             return Usd.Stage.OpenMasked(layer, Usd.StagePopulationMask([SPHERES]))
         return Usd.Stage.Open(layer)

@@ -8,8 +8,10 @@ out by hand below (in metres), never from the code under test.
 
 import math
 import os
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -326,6 +328,26 @@ def test_warpsims_own_output_reads_back_as_a_set(tmp_path):
                                rtol=0, atol=1e-15)
 
 
+def test_rigid_bodies_earth_gravity_and_usds_fallback_units(tmp_path):
+    """Parts of an enabled rigid body move: not obstacles (a disabled one is static). A physics
+    scene that gives only a direction has Earth's gravity; no metersPerUnit means centimetres."""
+    stage = Usd.Stage.CreateNew(str(tmp_path / "bodies.usda"))
+    for name, enabled in (("Cart", True), ("Parked", False)):
+        body = UsdGeom.Xform.Define(stage, f"/{name}")
+        api = UsdPhysics.RigidBodyAPI.Apply(body.GetPrim())
+        if not enabled:
+            api.CreateRigidBodyEnabledAttr(False)
+        UsdGeom.Cube.Define(stage, f"/{name}/Body").AddTranslateOp().Set(Gf.Vec3d(0, 300, 0))
+    UsdPhysics.Scene.Define(stage, "/Physics").CreateGravityDirectionAttr(Gf.Vec3f(1, 0, 0))
+    stage.GetRootLayer().Save()
+    boxes = ws.obstacles_from_usd(tmp_path / "bodies.usda")
+    assert boxes.stage.read == {"Cube": 1} and boxes.stage.skipped == {"rigid body": 1}
+    assert boxes.stage.meters_per_unit == 0.01 and boxes.stage.up_axis == "Y"
+    np.testing.assert_allclose(boxes.center, [[0.0, 3.0, 0.0]], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(boxes.half_extents, [[0.01, 0.01, 0.01]], rtol=0, atol=1e-17)
+    assert boxes.stage.gravity == (9.81, 0.0, 0.0)
+
+
 def test_importing_warpsim_does_not_load_pxr():
     code = ("import sys, warpsim; assert 'pxr' not in sys.modules; "
             "assert 'obstacles_from_usd' in warpsim.__all__; warpsim.obstacles_from_usd; "
@@ -454,3 +476,29 @@ def test_cli_run_prints_what_it_read_and_composes(set_path, tmp_path, capsys):
     assert read_usd(sub / "shot.usdc").position.shape == (11, 24, 3)
     code = main(["run", str(scene_path), "-o", str(set_path), "--no-progress"])
     assert code == 1 and "is the set the result composes over" in capsys.readouterr().err
+    code = main(["run", str(scene_path), "--dask", "--no-progress"])
+    assert code == 1 and "USD stage runs unsharded" in capsys.readouterr().err
+
+
+def readme_section() -> str:
+    readme = Path(__file__).resolve().parents[1] / "README.md"
+    if not readme.is_file():
+        pytest.skip("README.md not present (installed package)")
+    text = readme.read_text(encoding="utf-8")
+    return text.split("## Scenes on your own USD set", 1)[1].split("\n## ", 1)[0]
+
+
+def test_readme_scene_file_runs_on_a_set_and_its_summary_is_what_run_prints(set_path,
+                                                                           tmp_path):
+    section = readme_section()
+    toml = re.search(r"```toml\n(.*?)```", section, flags=re.S).group(1)
+    (tmp_path / "on-set.toml").write_text(toml, encoding="utf-8")
+    scene = ws.Scene.load(tmp_path / "on-set.toml")
+    swarm = scene.spawn(n=20, seed=1)
+    assert (swarm.position[:, 2] > 1.2).all()  # the emitter's region, z up, in metres
+    traj = ws.Simulator(scene, swarm).run(30)
+    assert traj.position[..., 2].min() >= swarm.radius.min() - 1e-5  # above the floor, z = 0
+    out = write_usd(tmp_path / "shot.usdc", scene, traj)
+    assert list(Sdf.Layer.FindOrOpen(str(out)).subLayerPaths) == ["./set.usda"]
+    quoted = re.search(r"`warpsim run` prints it:\n`(.*?)`", section, flags=re.S).group(1)
+    assert " ".join(quoted.split()) == scene.boxes.stage.summary()
