@@ -11,6 +11,7 @@ When a scene's obstacles come from a USD stage (:func:`warpsim.obstacles_from_us
         /Spheres                the PointInstancer, as write_usd writes it: positions [m] and
                                 radii [m], under xformOpOrder = [!resetXformStack!,
                                 xformOp:scale] with scale = 1 / metersPerUnit on each axis
+                                (then the writer's own per-frame origin, if it has one)
 
 The instancer's own transform maps its metres onto the set's units, and ``!resetXformStack!``
 keeps it in the stage's world frame even when the set has a ``/World`` prim of its own with a
@@ -79,9 +80,12 @@ def over_set(layer: Sdf.Layer, stage_set, output, instancer: str) -> Sdf.Layer:
     scale = 1.0 / float(stage_set.meters_per_unit)
     op = Sdf.AttributeSpec(spheres, "xformOp:scale", Sdf.ValueTypeNames.Double3)
     op.default = Gf.Vec3d(scale, scale, scale)
-    order = Sdf.AttributeSpec(spheres, "xformOpOrder", Sdf.ValueTypeNames.TokenArray,
-                              Sdf.VariabilityUniform)
-    order.default = Vt.TokenArray([RESET_XFORM_STACK, "xformOp:scale"])
+    order = spheres.attributes.get("xformOpOrder")  # the writer's own ops (an origin) go last
+    inner = list(order.default) if order is not None and order.default else []
+    if order is None:
+        order = Sdf.AttributeSpec(spheres, "xformOpOrder", Sdf.ValueTypeNames.TokenArray,
+                                  Sdf.VariabilityUniform)
+    order.default = Vt.TokenArray([RESET_XFORM_STACK, "xformOp:scale", *inner])
     out.documentation = (f"{layer.documentation} Composed over {asset} "
                          f"({stage_set.up_axis} up, {stage_set.meters_per_unit:g} m per unit): "
                          f"sphere positions and radii in metres, scaled to the set's units.")

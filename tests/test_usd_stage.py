@@ -502,3 +502,87 @@ def test_readme_scene_file_runs_on_a_set_and_its_summary_is_what_run_prints(set_
     assert list(Sdf.Layer.FindOrOpen(str(out)).subLayerPaths) == ["./set.usda"]
     quoted = re.search(r"`warpsim run` prints it:\n`(.*?)`", section, flags=re.S).group(1)
     assert " ".join(quoted.split()) == scene.boxes.stage.summary()
+
+
+# --------------------------------------------------------------------------------------------
+# Positions that keep their precision far from the origin
+
+
+def far_trajectory(center, spread, n=5, frames=61, speed=0.01, dt=1.0 / 60.0, seed=0):
+    """float64 spheres around ``center`` [m], ``spread`` [m] apart at most, moving ``speed``
+    [m/s] along x."""
+    rng = np.random.default_rng(seed)
+    start = np.asarray(center, dtype=np.float64) + rng.uniform(-spread / 2, spread / 2, (n, 3))
+    t = np.arange(frames) * dt
+    position = start[None] + t[:, None, None] * np.array([speed, 0.0, 0.0])
+    return ws.Trajectory(frame=np.arange(frames), dt=dt, position=position,
+                         orientation=np.tile([0.0, 0.0, 0.0, 1.0], (frames, n, 1)),
+                         radius=np.full(n, 0.05))
+
+
+def test_far_float64_positions_keep_their_motion(tmp_path):
+    """The issue's case: at x = 1e5 m, 10 mm/s over 61 frames is 2 distinct float32 values;
+    stored from a per-frame origin it keeps 2^-24 of the swarm's 2 m grid."""
+    traj = far_trajectory((1e5, 20.0, -3e4), spread=1.5)
+    assert len(np.unique(traj.position[:, 0, 0].astype(np.float32))) <= 3  # what float32 keeps
+    out = write_usd(tmp_path / "far.usdc", None, traj)
+    back = read_usd(out)
+    assert back.position.dtype == np.float64
+    assert len(np.unique(back.position[:, 0, 0])) == 61
+    np.testing.assert_allclose(back.position, traj.position, rtol=0, atol=2.0 * 2.0**-24)
+    # Read back exactly: the stored double origin plus the stored float32 offsets.
+    stage = Usd.Stage.Open(str(out))
+    instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Spheres"))
+    origin = instancer.GetPrim().GetAttribute("xformOp:translate:warpsimOrigin")
+    for f in (0, 30, 60):
+        rel = np.array(instancer.GetPositionsAttr().Get(f), dtype=np.float32)
+        np.testing.assert_array_equal(back.position[f],
+                                      np.array(origin.Get(f)) + rel.astype(np.float64))
+        to_world = np.array(instancer.ComputeLocalToWorldTransform(Usd.TimeCode(f)))
+        np.testing.assert_allclose(rel @ to_world[:3, :3] + to_world[3, :3], back.position[f],
+                                   rtol=1e-15)  # viewers place the spheres where they are
+    assert compliance_errors(out) == []
+
+
+def test_files_near_the_origin_have_no_origin_op(tmp_path):
+    traj = far_trajectory((30.0, 2.0, -10.0), spread=8.0)  # 30 m away: float32 keeps 2 um
+    out = write_usd(tmp_path / "near.usda", None, traj)
+    stage = Usd.Stage.Open(str(out))
+    prim = stage.GetPrimAtPath("/World/Spheres")
+    assert not prim.GetAttribute("xformOp:translate:warpsimOrigin")
+    assert not prim.GetAttribute("xformOpOrder").HasAuthoredValue()
+    np.testing.assert_array_equal(read_usd(out).position, traj.position.astype(np.float32))
+
+
+@settings(max_examples=25, deadline=None)
+@given(center=st.lists(st.floats(-1e7, 1e7), min_size=3, max_size=3),
+       spread=st.floats(0.0, 300.0), seed=st.integers(0, 100))
+def test_every_position_keeps_its_documented_precision(tmp_path_factory, center, spread, seed):
+    """``2^-16 G`` anywhere, ``2^-24 G`` far from the origin (G: the swarm's largest side
+    rounded up to a power of two, at least 1 m; export/origins.py)."""
+    traj = far_trajectory(center, spread, n=4, frames=2, seed=seed)
+    out = write_usd(tmp_path_factory.mktemp("far") / "far.usdc", None, traj)
+    back = read_usd(out)
+    for f in range(2):
+        p = traj.position[f]
+        grid = 2.0 ** math.ceil(math.log2(max(float(np.ptp(p, axis=0).max()), 1.0)))
+        far = np.abs(p).max() >= 256.0 * grid
+        bound = (2.0**-24 if far else 2.0**-16) * grid
+        assert np.abs(back.position[f] - p).max() <= bound
+
+
+def test_composed_result_keeps_far_positions_in_the_sets_units(set_path, tmp_path):
+    scene = ws.Scene.load(write_scene(tmp_path))
+    traj = far_trajectory((2e4, 0.0, 3.0), spread=1.0, frames=3)
+    out = write_usd(tmp_path / "far.usda", scene, traj)
+    stage = Usd.Stage.Open(str(out))
+    instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Spheres"))
+    order = instancer.GetXformOpOrderAttr().Get()
+    assert list(order) == ["!resetXformStack!", "xformOp:scale", "xformOp:translate:warpsimOrigin"]
+    rel = np.array(instancer.GetPositionsAttr().Get(2), dtype=np.float64)
+    to_world = np.array(instancer.ComputeLocalToWorldTransform(Usd.TimeCode(2)))
+    back = read_usd(out)
+    np.testing.assert_allclose(back.position, traj.position, rtol=0, atol=2.0**-24)
+    np.testing.assert_allclose(rel @ to_world[:3, :3] + to_world[3, :3],  # in centimetres
+                               back.position[2] / CM, rtol=1e-12, atol=1e-9)
+    assert compliance_errors(out) == []
