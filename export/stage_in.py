@@ -41,6 +41,7 @@ import numpy as np
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdPhysics
 
 from ..obstacles import RoundedBoxes
+from .usd_write import pxr_message
 
 RADIUS_ATTR = "warpsim:radius"
 HALF_EXTENTS_ATTR = "warpsim:halfExtents"
@@ -194,8 +195,7 @@ def _open(path) -> Usd.Stage:
             layer.Reload()
         stage = Usd.Stage.Open(text, Usd.Stage.LoadAll)
     except Tf.ErrorException as exc:
-        first = " ".join(str(exc).split("\n")[-1].split()) or "unreadable"
-        raise ValueError(f"USD could not read {text!r}: {first}") from None
+        raise ValueError(f"USD could not read {text!r}: {pxr_message(exc)}") from None
     if stage is None:
         raise ValueError(f"USD could not read {text!r}")
     return stage

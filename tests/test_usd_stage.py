@@ -207,11 +207,14 @@ def test_mirror_and_shear_are_refused_naming_the_prim(tmp_path):
     ("rounding larger than the box", lambda s: s.GetPrimAtPath("/Set/Crate").GetAttribute(
         "warpsim:radius").Set(6.0), r"/Set/Crate: warpsim:radius = 6 is more than half"),
     ("no such prim", None, r"no prim '/Nowhere'"),
+    ("not USD", "garbage", r"USD could not read .*set.usda"),
 ])
 def test_bad_sets_are_one_line_errors(set_path, case, edit, message):
     prim = None
     if edit is None:
         prim = "/Nowhere"
+    elif edit == "garbage":
+        set_path.write_text("#usda 1.0\n(\n  this is not USD\n", encoding="utf-8")
     else:
         stage = Usd.Stage.Open(str(set_path))
         edit(stage)
