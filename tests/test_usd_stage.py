@@ -440,6 +440,9 @@ def test_run_composes_over_the_set_in_its_axes_and_units(set_path, tmp_path, fmt
     np.testing.assert_array_equal(back.position, traj.position.astype(np.float32))
     np.testing.assert_array_equal(back.radius, traj.radius)
     assert back.dt == traj.dt
+    again = ws.obstacles_from_usd(out)  # a result is a set too: the set's boxes, once
+    assert_boxes(again, EXPECTED)
+    assert again.stage.skipped == {**EXPECTED_SKIPPED, "PointInstancer": 1}
 
 
 def test_spheres_stay_in_the_world_frame_of_a_set_with_its_own_world_prim(tmp_path):
