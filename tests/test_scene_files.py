@@ -622,7 +622,8 @@ def test_documented_example_loads_and_spawns(tmp_path):
     doc = Path(__file__).resolve().parents[1] / "README.md"
     if not doc.is_file():
         pytest.skip("README.md not present (installed package)")
-    blocks = re.findall(r"```toml\n(.*?)```", doc.read_text(encoding="utf-8"), flags=re.S)
+    section = doc.read_text(encoding="utf-8").split("## Scene files (TOML)", 1)[1]
+    blocks = re.findall(r"```toml\n(.*?)```", section.split("\n## ", 1)[0], flags=re.S)
     assert len(blocks) == 1
     scene = load_scene(write(tmp_path, blocks[0], "example.toml"))
     assert scene.name == "example" and len(scene.boxes) == 8 + 12

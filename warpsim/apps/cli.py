@@ -262,7 +262,14 @@ def _cmd_run(args) -> int:
     from ..export.files import check_writable
 
     scene = ws.Scene.load(args.scene)
-    if args.dask is not None or args.shards is not None or args.block is not None:
+    stage_set = getattr(scene.boxes, "stage", None)  # obstacles read from a USD stage
+    if stage_set is not None:
+        print(stage_set.summary(), file=sys.stderr)
+    sharded = args.dask is not None or args.shards is not None or args.block is not None
+    if sharded and stage_set is not None:
+        raise ValueError("--dask: a scene whose obstacles come from a USD stage runs unsharded "
+                         "(its result composes over the stage)")
+    if sharded:
         print(_run_sharded(args, scene))  # sharded: the spheres are drawn on the workers
         return 0
     swarm = scene.spawn(n=args.count, seed=args.seed)
@@ -272,6 +279,10 @@ def _cmd_run(args) -> int:
         raise ValueError("output path (-o) is empty")
     out = check_writable(args.output if args.output is not None else f"{scene.name}.usdc",
                          USD_SUFFIXES)
+    if stage_set is not None:
+        from ..export.compose import check_output
+
+        check_output(stage_set, out)
     if args.events is not None:
         from ..events import require_parquet
 
