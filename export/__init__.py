@@ -16,6 +16,7 @@ _HOMES = {
     "draw_frame": "preview",
     "estimate_usd_bytes": "usd_write",
     "half_orientations": "usd_write",
+    "obstacles_from_usd": "stage_in",
     "read_usd": "usd_read",
     "read_usd_boxes": "usd_read",
     "read_usd_frame": "usd_read",

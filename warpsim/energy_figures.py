@@ -5,34 +5,35 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Energy floors below this [J] are treated as zero when scaling relative energy figures.
-ENERGY_SCALE_FLOOR = 1e-30
+
+def lowest(sim, start) -> float:
+    """The lowest potential per unit mass of :func:`warpsim.energy.lowest_potential` over the
+    obstacles, the ``start`` positions and the corners of the scene's emitter region (where
+    every start lies): the same for a whole swarm and for any shard of it."""
+    from .energy import lowest_potential
+
+    points = np.asarray(start, dtype=np.float64).reshape(-1, 3)
+    emitter = getattr(sim.scene, "emitter", None)
+    if emitter is not None:
+        c = np.asarray(emitter.center, dtype=np.float64)
+        h = np.asarray(emitter.half_extents, dtype=np.float64)
+        points = np.concatenate([points, [c - h, c + h]])
+    return lowest_potential(sim.scene.gravity, sim.scene.boxes, points, sim.energy_origin)
 
 
-def energy_scale(sim) -> tuple[np.ndarray, np.ndarray]:
-    """Initial energies (N,) and each sphere's energy above the lowest point of the scene (N,),
-    the scale of relative energy figures (near 0: kept; 1: all of it) [J]."""
-    scene = sim.scene
-    g = scene.gravity
-    if len(scene.boxes) and np.any(g):
-        corners = scene.boxes.center + scene.boxes.bounding_radius()[:, None] * np.sign(g)
-        floor = corners[np.argmin(corners @ -g)]
-    else:
-        floor = sim.energy_origin
-    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
-    floor_potential = -sim.mass * ((floor - sim.energy_origin) @ g)
-    return e0, np.maximum(e0 - floor_potential, ENERGY_SCALE_FLOOR)
-
-
-def figures(sim, state=None) -> dict:
+def figures(sim, start, state=None) -> dict:
     """``{"spheres", "drift", "lost", "scale", "gained", "retention"}`` of a simulator's state:
     the largest relative drift and gain per sphere, the energy lost and the energy above the
-    lowest obstacle (sums [J]); :func:`combine` merges shards', :func:`line` says them."""
-    e0, scale = energy_scale(sim)
+    lowest point (sums [J]), on the scale of :mod:`warpsim.energy`; ``start``: the swarm's
+    start positions [m]; :func:`combine` merges shards', :func:`line` says them."""
+    from .energy import energy_scale
+
+    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
     if not len(e0):
         return {"spheres": 0, "drift": 0.0, "lost": 0.0, "scale": 0.0, "gained": 0.0,
                 "retention": float(sim.scene.energy_retention)}
-    energy = sim.mechanical_energy(state)
+    scale = energy_scale(e0, sim.mass, lowest(sim, start))
+    energy = np.asarray(sim.mechanical_energy(state), dtype=np.float64)
     return {"spheres": int(len(e0)), "drift": float(np.max(np.abs(energy - e0) / scale)),
             "lost": float(np.sum(e0 - energy)), "scale": float(np.sum(scale)),
             "gained": float(np.max((energy - e0) / scale)),
@@ -57,11 +58,11 @@ def line(fig: dict) -> str:
         return "energy: no spheres"
     if fig["retention"] < 1.0:
         lost = fig["lost"] / fig["scale"] if fig["scale"] > 0 else 0.0
-        text = (f"energy lost at contacts: {100.0 * lost:.1f}% of the energy above the lowest "
-                f"obstacle (energy_retention = {fig['retention']:g})")
+        text = (f"energy lost at contacts: {100.0 * lost:.1f}% of the energy above the scene's "
+                f"lowest point (energy_retention = {fig['retention']:g})")
         return text + (f"; largest gain {fig['gained']:.2e} (relative)"
                        if fig["gained"] > 0.0 else "")
     return f"energy drift: {fig['drift']:.2e} (largest per sphere, relative)"
 
 
-__all__ = ["combine", "energy_scale", "figures", "line"]
+__all__ = ["combine", "figures", "line", "lowest"]

@@ -15,8 +15,8 @@ import sys
 
 import numpy as np
 
-from ..validation import PRECISIONS
-from ..vocabulary import BroadPhase, ContactKind, Motion
+from ..vocabulary import ContactKind
+from .options import add_simulation_options
 from .startup import check_device, init_warp
 
 EXIT_ERROR = 1
@@ -94,9 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="simulate a scene and write a USD animation")
-    run.add_argument("scene", help="bundled scene name (see 'warpsim scenes') or a .toml path")
-    run.add_argument("-n", "--count", type=int, help="number of spheres (default: the scene's)")
-    run.add_argument("--frames", type=int, help="frames to simulate (default: the scene's)")
+    add_simulation_options(run)
     run.add_argument("--start", type=int, default=0,
                      help="first frame written (the run still starts at frame 0)")
     run.add_argument("--end", type=int,
@@ -105,15 +103,6 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--dt", type=float, help="time step [s] (default: the scene's)")
     run.add_argument("--seed", type=int, help="emitter seed (default: the scene's)")
     run.add_argument("--max-bounces", type=int, help="contacts per sphere per frame")
-    run.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's)")
-    run.add_argument("--precision", default="float32", choices=PRECISIONS)
-    run.add_argument("--broad-phase", default=BroadPhase.AUTO, choices=tuple(BroadPhase),
-                     help="candidate boxes per sphere: every box (brute), a BVH (bvh), a "
-                          "uniform grid (grid), or chosen from a cost model (auto); the same "
-                          "results; the summary says which ran")
-    run.add_argument("--motion", choices=tuple(Motion),
-                     help="path within a frame: the chord or the exact parabola")
-    run.add_argument("--workers", type=int, help="CPU threads stepping the swarm")
     run.add_argument("-o", "--output",
                      help="output .usdc or .usda (default: the scene's name + .usdc, here)")
     run.add_argument("--every", type=int, default=1, help="record one frame in EVERY")
@@ -180,11 +169,12 @@ def _cmd_scenes(_args) -> int:
     return 0
 
 
-def energy_line(sim, state) -> str:
-    """The summary's energy line (:func:`warpsim.energy_figures.line`)."""
+def energy_line(sim, swarm, state) -> str:
+    """The summary's energy line (:func:`warpsim.energy_figures.line`, on the scale of
+    :mod:`warpsim.energy`), the same figures a sharded run adds up."""
     from .. import energy_figures
 
-    return energy_figures.line(energy_figures.figures(sim, state))
+    return energy_figures.line(energy_figures.figures(sim, swarm.position, state))
 
 
 def _run_options(args) -> dict:
@@ -312,7 +302,14 @@ def _cmd_run(args) -> int:
     from ..export.files import check_writable, default_name
 
     scene = ws.Scene.load(args.scene)
-    if args.dask is not None or args.shards is not None:
+    stage_set = getattr(scene.boxes, "stage", None)  # obstacles read from a USD stage
+    if stage_set is not None:
+        print(stage_set.summary(), file=sys.stderr)
+    sharded = args.dask is not None or args.shards is not None
+    if sharded and stage_set is not None:
+        raise ValueError("--dask: a scene whose obstacles come from a USD stage runs unsharded "
+                         "(its result composes over the stage)")
+    if sharded:
         print(_run_sharded(args, scene))  # sharded: the spheres are drawn on the workers
         return 0
     start, end = _frame_range(args, scene.frames)
@@ -321,6 +318,10 @@ def _cmd_run(args) -> int:
         raise ValueError("output path (-o) is empty")
     out = check_writable(args.output if args.output is not None
                          else default_name(scene.name, ".usdc"), USD_SUFFIXES)
+    if stage_set is not None:
+        from ..export.compose import check_output
+
+        check_output(stage_set, out)
     if args.events is not None:
         from ..events import require_parquet
 
@@ -373,7 +374,7 @@ def _cmd_run(args) -> int:
           f"(kernel build {build:.2f} s): "
           f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
     print(bounce_line(stats, traj.events))
-    print(energy_line(sim, state))
+    print(energy_line(sim, swarm, state))
     print(f"broad phase: {describe_broad_phase(stats.broad_phase, stats.requested_broad_phase)}")
 
     def write_scene():

@@ -205,7 +205,7 @@ def simulate_shard(scene: Scene, spec: RunSpec, index: int,
     key = spec.shard_key(index)
     from .. import energy_figures
 
-    energy = energy_figures.figures(sim)
+    energy = energy_figures.figures(sim, swarm.position)
     digest = write_shard_layer(spec.layer_path(index), trajectory,
                                np.arange(start, stop, dtype=np.int64), index, spec.count,
                                {"key": key, "start": int(start), "stop": int(stop),
