@@ -257,8 +257,10 @@ def test_the_kept_spheres_are_the_chosen_ones(tmp_path, capsys):
                        "-o", usd, "--no-progress")
     assert code == 0, err
     scene = ws.Scene.load("room")
-    whole = ws.Simulator(scene, scene.spawn(n=300)).run(4)
-    part = ws.Simulator(scene, scene.spawn(n=300)).run(4, spheres=[7, 3, 250])
+    from warpsim.distributed.draw import sharded_spawn  # the command line's draw
+
+    whole = ws.Simulator(scene, sharded_spawn(scene, 300)).run(4)
+    part = ws.Simulator(scene, sharded_spawn(scene, 300)).run(4, spheres=[7, 3, 250])
     assert part.position.shape == (5, 3, 3) and part.sphere_ids.tolist() == [7, 3, 250]
     np.testing.assert_array_equal(part.position, whole.position[:, [7, 3, 250]])
     np.testing.assert_array_equal(part.radius, whole.radius[[7, 3, 250]])

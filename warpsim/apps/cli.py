@@ -15,7 +15,7 @@ import sys
 
 import numpy as np
 
-from ..vocabulary import ContactKind
+from ..vocabulary import BroadPhase, ContactKind
 from .options import add_simulation_options
 from .startup import check_device, init_warp
 
