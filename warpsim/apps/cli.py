@@ -247,8 +247,8 @@ def check_memory(args, n: int, kept: int, records: int, every: int, frames: int,
 
 def _run_sharded(args, scene):
     """``warpsim run SCENE --dask [ADDRESS] [--shards N] [--block B]``:
-    :func:`warpsim.distributed.run` from the command line's options (``--shards`` or
-    ``--block`` without ``--dask`` shard in this process). ``--workers`` is the threads of each
+    :func:`warpsim.distributed.run` from the command line's options (``--shards``
+    without ``--dask`` shards in this process). ``--workers`` is the threads of each
     shard's simulator.
 
     Raises:

@@ -11,7 +11,8 @@ obstacles, per sphere (the emitter's rejection sampling, then
 :func:`warpsim.feasibility.check_outside`), exactly as :meth:`warpsim.Scene.spawn` checks it.
 It is **not** the draw of ``scene.spawn(n, seed)`` (one stream for the whole swarm): a single
 stream cannot be split among workers without drawing all of it, so the sharded draw is its own
-(equally valid) sample; ``warpsim run`` without ``--dask`` keeps ``scene.spawn``. Changing
+(equally valid) sample; ``warpsim run`` uses it with or without ``--dask``/``--shards``, so the
+same command always simulates the same spheres. Changing
 ``block`` changes the draw; it is stored in every manifest.
 """
 
