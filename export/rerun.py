@@ -1,0 +1,616 @@
+"""Rerun recordings of warpsim runs (``.rrd``): a timeline to scrub, a camera to turn, spheres to
+pick, contacts and energy plots beside the 3D view.
+
+rerun-sdk is the optional ``viewer`` extra (``pip install "warpsim[viewer]"``); it is imported
+only when a recording is written or read. :mod:`warpsim.export.rerun_viewer` opens recordings.
+
+Recording layout (application id ``warpsim``; world units are metres, the scene's own axes)::
+
+    world                      ViewCoordinates (static): right-handed, the axis opposite to
+                               gravity up (Y when gravity is zero or not along an axis's minus)
+    world/obstacles/shape_0000 one entity per distinct obstacle shape (static): Mesh3D in the
+                               box's local frame (rounded_box_mesh with 4 segments or box_mesh,
+                               triangulated) drawn at every box of that shape by InstancePoses3D
+                               (translations = centres, quaternions (x, y, z, w) local -> world);
+                               AnyValues ``box`` (scene indices), ``half_extents`` (3 per box,
+                               flattened) and ``rounding`` [m] keep the boxes exactly (float64)
+    world/spheres              Points3D: ``radii`` [m], ``colors`` (a stable colour per swarm
+                               index), ``labels`` ("sphere 17", hidden in the view) and AnyValues
+                               ``sphere`` (swarm indices), static; ``positions`` [m] (float32)
+                               at every recorded frame
+    world/contacts             Points3D at the contact centres of each frame (only that frame's:
+                               an empty list at frames without contacts), bounces orange and
+                               resting contacts grey, with AnyValues ``sphere``, ``box``,
+                               ``fraction``, ``normal_speed`` [m/s] and ``resting`` per contact;
+                               world/contacts/normals: Arrows3D of the unit normals (a tenth of
+                               the obstacles' median size long)
+    plots/energy_drift, plots/energy, plots/bounces, plots/capped
+                               Scalars per recorded frame (see :class:`FrameScalars`)
+    description                TextDocument (static): scene, counts, time step
+
+Timelines: ``frame``, a sequence of integer simulation frames (frame ``k`` is the state after
+``k`` steps of ``dt``, as in :class:`warpsim.Trajectory`), and ``time``, a duration in seconds
+(``frame * dt``). Sphere orientations are not recorded (the points are round).
+"""
+
+from __future__ import annotations
+
+import colorsys
+import importlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .. import validation as check
+from ..trajectory import Trajectory
+from .files import atomic_output, check_writable
+from .mesh import box_mesh, rounded_box_mesh
+
+SUFFIX = ".rrd"
+APPLICATION_ID = "warpsim"
+FRAME = "frame"  # the sequence timeline: integer simulation frames
+TIME = "time"  # the duration timeline: frame * dt [s]
+WORLD = "world"
+OBSTACLES = "world/obstacles"
+SPHERES = "world/spheres"
+CONTACTS = "world/contacts"
+NORMALS = "world/contacts/normals"
+PLOTS = "plots"
+DESCRIPTION = "description"
+ROUNDED_SEGMENTS = 4  # edges per quarter circle of rounded edges (7 kB a shape; the USD has 8)
+GOLDEN = 0.6180339887498949  # hue step between consecutive sphere ids: neighbours differ
+SPHERE_SATURATION, SPHERE_VALUE = 0.65, 0.95
+BOUNCE_COLOR = (255, 120, 30)
+RESTING_COLOR = (150, 150, 150)
+NORMAL_LENGTH_SHARE = 0.1  # normal arrows: this share of the obstacles' median bounding radius
+CONTACT_RADIUS_UI = -3.0  # contact points 3 UI points wide whatever the zoom (Rerun: r < 0)
+
+# Size model fitted on written files (rerun-sdk 0.41, benchmarks/rerun_write.py): bytes =
+# fixed + per_frame F + N (per_sphere + F per_sphere_frame) + per_shape S + per_box K
+# + per_event E + per_event_frame (frames the contacts span).
+_SIZE_MODEL = {"fixed": 6_000, "per_frame": 60, "per_sphere": 40, "per_sphere_frame": 12,
+               "per_shape": 12_000, "per_box": 70, "per_event": 60, "per_event_frame": 16}
+
+
+def _rerun():
+    try:
+        return importlib.import_module("rerun")
+    except ImportError:
+        raise ModuleNotFoundError('rerun-sdk is needed for Rerun recordings: '
+                                  'pip install "warpsim[viewer]"') from None
+
+
+def require_rerun() -> None:
+    """Check, before a long run, that recordings can be written here.
+
+    Raises:
+        ModuleNotFoundError: rerun-sdk is missing; the message names the ``viewer`` extra.
+    """
+    _rerun()
+
+
+def check_rerun_path(path) -> Path:
+    """``path`` as a :class:`pathlib.Path` once it is known to end in ``.rrd`` (any case) and
+    to be writable (its folder exists).
+
+    Raises:
+        ValueError: another extension or an empty path. FileNotFoundError, OSError: the
+            folder is missing or cannot be written.
+    """
+    return check_writable(path, (SUFFIX,), what="Rerun recording")
+
+
+@dataclass(repr=False)
+class FrameScalars:
+    """Per recorded frame figures of a run, plotted by :func:`write_rerun`.
+
+    Attributes:
+        frame: the recorded frames, (R,) int64 (those of the trajectory).
+        energy: total energy of the swarm [J], (R,) float64 (:meth:`Simulator.mechanical_energy`).
+        energy_drift: the largest per-sphere change of energy since the start, relative to each
+            sphere's ``energy_scale`` (the command line's: the energy above the lowest obstacle),
+            (R,) float64; 0 at the start.
+        bounces: contacts taken since the previous recorded frame, all spheres (resting contacts
+            included, as :attr:`Stats.bounces` counts them), (R,) int64; 0 at the first.
+        capped: sphere-frames stopped by ``max_bounces`` since the previous recorded frame,
+            (R,) int64.
+    """
+
+    frame: np.ndarray
+    energy: np.ndarray
+    energy_drift: np.ndarray
+    bounces: np.ndarray
+    capped: np.ndarray
+
+    def __post_init__(self):
+        self.frame = np.asarray(self.frame, dtype=np.int64)
+        r = self.frame.shape
+        for name, dtype in (("energy", np.float64), ("energy_drift", np.float64),
+                            ("bounces", np.int64), ("capped", np.int64)):
+            values = np.asarray(getattr(self, name), dtype=dtype)
+            if values.shape != r:
+                raise ValueError(f"{name} must have shape {r} (one per recorded frame), "
+                                 f"got {values.shape}")
+            setattr(self, name, values)
+
+    def __len__(self) -> int:
+        return int(self.frame.size)
+
+    def __repr__(self) -> str:
+        return f"FrameScalars({len(self)} recorded frames)"
+
+    def plots(self) -> dict[str, np.ndarray]:
+        """Entity name under ``plots/`` -> values (R,), in the recording's order."""
+        return {"energy_drift": self.energy_drift, "energy": self.energy,
+                "bounces": self.bounces, "capped": self.capped}
+
+
+def _concatenate_events(parts: list):
+    from ..events import ContactEvents
+
+    if not parts:
+        return None
+    fields = ("frame", "fraction", "sphere", "box", "position", "normal", "normal_speed",
+              "resting")
+    return ContactEvents(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields},
+                         dropped=sum(p.dropped for p in parts))
+
+
+def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False,
+                     energy_scale=None, **options) -> tuple[Trajectory, FrameScalars]:
+    """:meth:`Simulator.run` that also samples :class:`FrameScalars` at each recorded frame.
+
+    The run is made of one ``sim.run`` per recorded interval (``every`` frames, the last one
+    shorter), so that the counters and the energy are read between them; results are the same
+    bits as one ``sim.run(frames, every)`` (the simulator's launches are bit-identical whatever
+    their length), at the price of one launch per recorded frame.
+
+    Args:
+        sim: a :class:`warpsim.Simulator`.
+        frames: frames to advance, >= 1. every: record one frame in ``every``, >= 1.
+        progress: one tqdm progress bar on standard error for the whole run.
+        energy_scale: per-sphere energy scale [J], (N,), dividing the energy changes of
+            ``energy_drift``; None: ``max(|E0|, 1e-30)``.
+        options: more keywords of ``Simulator.run`` (``velocities``, ``events``,
+            ``event_capacity``).
+
+    Returns:
+        ``(trajectory, scalars)``: what ``sim.run(frames, every, **options)`` returns, and the
+        figures at its recorded frames.
+    """
+    from tqdm import tqdm
+
+    frames = check.positive_int("frames", frames)
+    every = check.positive_int("every", every)
+    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
+    scale = (np.maximum(np.abs(e0), 1e-30) if energy_scale is None
+             else np.asarray(energy_scale, dtype=np.float64))
+    if scale.shape != e0.shape:
+        raise ValueError(f"energy_scale must have shape {e0.shape}, got {scale.shape}")
+
+    def sample():
+        stats = sim.stats
+        energy = sim.mechanical_energy()
+        drift = float(np.max(np.abs(energy - e0) / scale)) if energy.size else 0.0
+        return float(energy.sum()), drift, stats.bounces, stats.capped
+
+    samples = [sample()]
+    pieces, events = [], []
+    bar = tqdm(total=frames, unit="frame", disable=not progress, leave=False)
+    try:
+        done = 0
+        while done < frames:
+            todo = min(every, frames - done)
+            piece = sim.run(todo, every=todo, **options)
+            pieces.append(piece)
+            if piece.events is not None:
+                events.append(piece.events)
+            samples.append(sample())
+            done += todo
+            bar.update(todo)
+    finally:
+        bar.close()
+    first = pieces[0]
+
+    def stacked(name):
+        if getattr(first, name) is None:
+            return None
+        return np.concatenate([getattr(first, name)[:1]]
+                              + [getattr(p, name)[1:] for p in pieces])
+
+    traj = Trajectory(frame=stacked("frame"), dt=first.dt, position=stacked("position"),
+                      orientation=stacked("orientation"), radius=first.radius,
+                      velocity=stacked("velocity"), angular_velocity=stacked("angular_velocity"),
+                      events=_concatenate_events(events))
+    energy, drift, bounces, capped = (np.array(column) for column in zip(*samples))
+    scalars = FrameScalars(frame=traj.frame, energy=energy, energy_drift=drift,
+                           bounces=np.diff(bounces, prepend=bounces[0]),
+                           capped=np.diff(capped, prepend=capped[0]))
+    return traj, scalars
+
+
+# --------------------------------------------------------------------------------------------
+# Sizes
+
+
+def _shape_table(boxes) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct shapes in order of first use: (shape of each box (K,), shapes (S, 4) = half
+    extents and rounding). Equal means equal to the bit."""
+    key = np.ascontiguousarray(np.column_stack([boxes.half_extents, boxes.radius]))
+    _, first, inverse = np.unique(key.view(np.dtype((np.void, key.dtype.itemsize * 4))),
+                                  return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    return rank[inverse.reshape(-1)], key[first[order]]
+
+
+def estimate_rerun_bytes(n_spheres: int, n_frames: int, *, boxes=None, events: int = 0,
+                         event_frames: int = 0) -> int:
+    """Estimated size of a file written by :func:`write_rerun` [bytes].
+
+    A linear model fitted on written files (``benchmarks/rerun_write.py``): 12 B per sphere and
+    recorded frame (float32 positions; Rerun's chunks compress them little), a few tens of bytes
+    per sphere (radius, colour, label, id) and per recorded frame (timelines and plots), a mesh
+    per distinct obstacle shape (about 12 kB rounded, less sharp), and about 60 B per contact.
+
+    Args:
+        n_spheres: spheres written. n_frames: recorded frames written (after ``stride``).
+        boxes: the obstacles (:class:`warpsim.RoundedBoxes` or a :class:`warpsim.Scene`), or None.
+        events: contacts written. event_frames: frames the contacts' timeline spans.
+
+    Raises:
+        ValueError: negative counts.
+    """
+    n, f, e, ef = (int(v) for v in (n_spheres, n_frames, events, event_frames))
+    if min(n, f, e, ef) < 0:
+        raise ValueError(f"counts must be >= 0, got n_spheres={n_spheres}, n_frames={n_frames}, "
+                         f"events={events}, event_frames={event_frames}")
+    m = _SIZE_MODEL
+    total = (m["fixed"] + m["per_frame"] * f + n * (m["per_sphere"] + f * m["per_sphere_frame"])
+             + m["per_event"] * e + m["per_event_frame"] * ef)
+    boxes = getattr(boxes, "boxes", boxes)
+    if boxes is not None and len(boxes):
+        _, shapes = _shape_table(boxes)
+        total += m["per_shape"] * len(shapes) + m["per_box"] * len(boxes)
+    return int(total)
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+
+
+def sphere_colors(ids) -> np.ndarray:
+    """A stable colour per swarm index: hues ``frac(id * golden ratio)`` (neighbouring ids
+    far apart on the colour wheel), fixed saturation and value; (N, 3) uint8 sRGB."""
+    ids = np.asarray(ids, dtype=np.int64)
+    hue = np.mod(ids * GOLDEN, 1.0)
+    rgb = [colorsys.hsv_to_rgb(h, SPHERE_SATURATION, SPHERE_VALUE) for h in hue]
+    return np.round(np.array(rgb, dtype=np.float64).reshape(-1, 3) * 255.0).astype(np.uint8)
+
+
+def _srgb(linear) -> tuple[int, int, int]:
+    """A linear RGB colour in [0, 1] as 8-bit sRGB (IEC 61966-2-1 transfer curve)."""
+    c = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
+    s = np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1.0 / 2.4) - 0.055)
+    return tuple(int(v) for v in np.round(s * 255.0))
+
+
+def triangulated(points, counts, indices) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A polygon mesh as triangles with vertex normals, for Rerun's Mesh3D.
+
+    Each polygon is fanned from its first vertex (counter-clockwise kept). Vertex normals are
+    the area-weighted mean of the normals of the triangles around the vertex; a vertex only on
+    zero-area faces (a plate's edges) gets the unit direction from the origin to it (the box's
+    local centre), or +Y at the origin.
+
+    Returns:
+        ``(points (P, 3) float32, triangles (T, 3) uint32, normals (P, 3) float32)``.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    counts = np.asarray(counts, dtype=np.int64)
+    indices = np.asarray(indices, dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    tris = [np.stack([indices[starts[counts > j]], indices[starts[counts > j] + j],
+                      indices[starts[counts > j] + j + 1]], axis=1)
+            for j in range(1, int(counts.max()) - 1)] if counts.size else []
+    triangles = np.concatenate(tris) if tris else np.zeros((0, 3), dtype=np.int64)
+    a, b, c = (points[triangles[:, k]] for k in range(3))
+    face = np.cross(b - a, c - a)  # length = twice the area: area weighting
+    normals = np.zeros_like(points)
+    for k in range(3):
+        np.add.at(normals, triangles[:, k], face)
+    size = np.linalg.norm(normals, axis=1)
+    fallback = points / np.maximum(np.linalg.norm(points, axis=1), 1e-300)[:, None]
+    fallback[np.linalg.norm(points, axis=1) == 0.0] = (0.0, 1.0, 0.0)
+    normals = np.where((size > 0.0)[:, None], normals / np.maximum(size, 1e-300)[:, None],
+                       fallback)
+    return points.astype(np.float32), triangles.astype(np.uint32), normals.astype(np.float32)
+
+
+def _up_axis(rr, gravity):
+    g = np.asarray(gravity, dtype=np.float64)
+    axis = int(np.argmax(np.abs(g)))
+    if not np.any(g) or g[axis] >= 0.0:
+        return rr.ViewCoordinates.RIGHT_HAND_Y_UP
+    return (rr.ViewCoordinates.RIGHT_HAND_X_UP, rr.ViewCoordinates.RIGHT_HAND_Y_UP,
+            rr.ViewCoordinates.RIGHT_HAND_Z_UP)[axis]
+
+
+def _camera(gravity, position: np.ndarray, boxes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(eye, target, up) of the 3D view's first camera: at the upper corner of the region the
+    spheres fill at the first written frame (2nd to 98th percentile, so inside a closed room),
+    looking at its centre; the obstacles' bounds when there are no spheres."""
+    up = -np.asarray(gravity, dtype=np.float64)
+    up = up / np.linalg.norm(up) if np.any(up) else np.array([0.0, 1.0, 0.0])
+    if position.size:
+        lo, hi = np.percentile(position, [2.0, 98.0], axis=0)
+    elif boxes is not None and len(boxes):
+        reach = boxes.bounding_radius()[:, None]
+        lo, hi = (boxes.center - reach).min(axis=0), (boxes.center + reach).max(axis=0)
+    else:
+        lo, hi = -np.ones(3), np.ones(3)
+    center, half = (lo + hi) / 2.0, np.maximum((hi - lo) / 2.0, 1e-3)
+    axis = int(np.argmax(np.abs(up)))
+    offset = half.copy()
+    offset[axis] = half[axis] * 0.5 * np.sign(up[axis])
+    return center + offset, center, up
+
+
+def _blueprint(eye, target, up, plots: list[str]):
+    import rerun.blueprint as rrb
+
+    side = [rrb.TimeSeriesView(origin=f"{PLOTS}/{name}", name=name.replace("_", " "))
+            for name in plots]
+    side.append(rrb.TextDocumentView(origin=DESCRIPTION, name="run"))
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin=WORLD, name="spheres and obstacles",
+                              eye_controls=rrb.EyeControls3D(position=eye, look_target=target,
+                                                             eye_up=up)),
+            rrb.Vertical(*side), column_shares=[3, 1]),
+        rrb.TimePanel(timeline=FRAME))
+
+
+def _log_obstacles(rr, rec, boxes) -> None:
+    from .usd import OBSTACLE_COLOR  # the USD's obstacle colour (linear RGB)
+
+    color = _srgb(OBSTACLE_COLOR)
+    shape_of, shapes = _shape_table(boxes)
+    for s, shape in enumerate(shapes):
+        members = np.flatnonzero(shape_of == s)
+        h, rounding = shape[:3], float(shape[3])
+        mesh = (rounded_box_mesh(h, rounding, ROUNDED_SEGMENTS) if rounding > 0.0
+                else box_mesh(h))
+        points, triangles, normals = triangulated(*mesh)
+        path = f"{OBSTACLES}/shape_{s:04d}"
+        rec.log(path, rr.Mesh3D(vertex_positions=points, triangle_indices=triangles,
+                                vertex_normals=normals, albedo_factor=color), static=True)
+        rec.log(path, rr.InstancePoses3D(translations=boxes.center[members],
+                                         quaternions=boxes.rotation[members]), static=True)
+        rec.log(path, rr.AnyValues(box=members.astype(np.int64),
+                                   half_extents=np.tile(h, members.size),
+                                   rounding=np.full(members.size, rounding)), static=True)
+
+
+def _timelines(rr, frames: np.ndarray, dt: float) -> list:
+    return [rr.TimeColumn(FRAME, sequence=frames),
+            rr.TimeColumn(TIME, duration=frames.astype(np.float64) * dt)]
+
+
+def _log_contacts(rr, rec, events, ids: np.ndarray, frames: np.ndarray, dt: float,
+                  length: float) -> int:
+    """Contacts of the written spheres, each at its own frame; returns how many."""
+    rows = np.flatnonzero(np.isin(events.sphere, ids) & (events.frame >= frames[0]))
+    rows = rows[np.argsort(events.frame[rows], kind="stable")]
+    if rows.size == 0:
+        return 0
+    first = int(frames[0])
+    span = np.arange(first, max(int(frames[-1]), int(events.frame[rows].max())) + 1)
+    lengths = np.bincount(events.frame[rows] - first, minlength=span.size)
+    resting = events.resting[rows]
+    colors = np.where(resting[:, None], np.array(RESTING_COLOR, dtype=np.uint8),
+                      np.array(BOUNCE_COLOR, dtype=np.uint8))
+    position = events.position[rows].astype(np.float32)
+    indexes = _timelines(rr, span, dt)
+    rec.send_columns(CONTACTS, indexes=indexes, columns=[
+        *rr.Points3D.columns(positions=position, colors=colors,
+                             radii=np.full(rows.size, CONTACT_RADIUS_UI, dtype=np.float32)
+                             ).partition(lengths),
+        *rr.AnyValues.columns(sphere=events.sphere[rows], box=events.box[rows].astype(np.int64),
+                              fraction=events.fraction[rows],
+                              normal_speed=events.normal_speed[rows],
+                              resting=resting).partition(lengths)])
+    rec.send_columns(NORMALS, indexes=indexes, columns=rr.Arrows3D.columns(
+        origins=position, vectors=(events.normal[rows] * length).astype(np.float32),
+        colors=colors).partition(lengths))
+    return int(rows.size)
+
+
+def _sphere_rows(trajectory: Trajectory, stride: int, spheres, sample):
+    """Validated (frame rows, columns of the trajectory) to write; the last row always kept."""
+    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
+        raise ValueError(f"stride must be an integer >= 1, got {stride!r}")
+    frame = np.asarray(trajectory.frame)
+    n_frames, n = len(frame), trajectory.position.shape[1]
+    if n_frames == 0:
+        raise ValueError("trajectory has no recorded frames")
+    if trajectory.position.shape != (n_frames, n, 3):
+        raise ValueError(f"trajectory.position must have shape ({n_frames}, N, 3), "
+                         f"got {trajectory.position.shape}")
+    if np.shape(trajectory.radius) != (n,):
+        raise ValueError(f"trajectory.radius must have shape ({n},), "
+                         f"got {np.shape(trajectory.radius)}")
+    if not (np.isfinite(trajectory.dt) and trajectory.dt > 0):
+        raise ValueError(f"trajectory.dt must be > 0, got {trajectory.dt!r}")
+    if (np.diff(frame) <= 0).any():
+        raise ValueError("trajectory.frame must be strictly increasing")
+    rows = np.unique(np.r_[np.arange(0, n_frames, stride), n_frames - 1])
+    columns = np.arange(n) if spheres is None else check.index_list("spheres", spheres, n)
+    if sample is not None:
+        sample = check.positive_int("sample", sample)
+        if sample < columns.size:  # evenly spread over the selection, first and last kept
+            columns = columns[np.unique(np.round(np.linspace(0, columns.size - 1, sample))
+                                        .astype(np.int64))]
+    return rows, columns
+
+
+def write_rerun(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=None,
+                sample: int | None = None, ids=None, events=None,
+                scalars: FrameScalars | None = None) -> Path:
+    """Write a trajectory, its scene's obstacles, its contacts and its per-frame figures as a
+    Rerun recording (layout in the module docstring), atomically.
+
+    The recording is written under a temporary name next to ``path`` and renamed over it: on
+    any error nothing is left behind and a file already at ``path`` is untouched.
+
+    Args:
+        path: output file ending in ``.rrd`` (any case); its folder must exist.
+        scene: the :class:`warpsim.Scene` simulated, its :class:`warpsim.RoundedBoxes`, or None
+            for the spheres alone (then Y is up).
+        trajectory: the recorded frames; the ``frame`` timeline takes its integer ``frame``.
+        stride: keep every ``stride``-th recorded frame (and the last), >= 1.
+        spheres: indices (columns of the trajectory) of the spheres to write, or None for all.
+        sample: write at most this many of them, evenly spread over the selection (first and
+            last kept), >= 1; None for all.
+        ids: the swarm index of each sphere of the trajectory, (N,) (a trajectory read from a
+            file with a subset); None: ``0 .. N - 1``. Colours and labels follow them.
+        events: a :class:`warpsim.events.ContactEvents` (its ``sphere`` are swarm indices);
+            None takes ``trajectory.events``. Only the written spheres' contacts are written.
+        scalars: :class:`FrameScalars` of the run (their frames must be recorded frames of the
+            trajectory), plotted at the written frames; None for no plots.
+
+    Returns:
+        ``path`` as a :class:`pathlib.Path`.
+
+    Raises:
+        ValueError: bad extension, ``stride``, ``spheres``, ``sample``, ``ids`` or ``scalars``,
+            or an inconsistent trajectory. ModuleNotFoundError: rerun-sdk is missing (the
+            ``viewer`` extra). FileNotFoundError, OSError: the file cannot be written.
+    """
+    path = check_rerun_path(path)
+    rows, columns = _sphere_rows(trajectory, stride, spheres, sample)
+    n = trajectory.position.shape[1]
+    all_ids = np.arange(n, dtype=np.int64) if ids is None else np.asarray(ids)
+    if all_ids.shape != (n,) or (all_ids.size and not np.issubdtype(all_ids.dtype, np.integer)):
+        raise ValueError(f"ids must be {n} integer swarm indices, got shape {all_ids.shape}")
+    written_ids = all_ids.astype(np.int64)[columns]
+    frames = np.asarray(trajectory.frame, dtype=np.int64)[rows]
+    dt = float(trajectory.dt)
+    if scalars is not None:
+        where = {int(f): i for i, f in enumerate(scalars.frame)}
+        missing = [int(f) for f in frames if int(f) not in where]
+        if missing:
+            raise ValueError(f"scalars have no value at recorded frame {missing[0]}")
+        scalar_rows = np.array([where[int(f)] for f in frames], dtype=np.int64)
+    events = trajectory.events if events is None else events
+    boxes = None if scene is None else getattr(scene, "boxes", scene)
+    rr = _rerun()
+
+    gravity = getattr(scene, "gravity", (0.0, 0.0, 0.0))
+    position = np.asarray(trajectory.position)[rows][:, columns].astype(np.float32)
+    blueprint = _blueprint(*_camera(gravity, position[0], boxes),
+                           [] if scalars is None else list(scalars.plots()))
+    name = getattr(scene, "name", "")
+    rec = rr.RecordingStream(APPLICATION_ID, send_properties=False)
+    with atomic_output(path) as tmp:
+        rec.save(tmp, default_blueprint=blueprint)
+        rec.send_recording_name(name or APPLICATION_ID)
+        rec.log(WORLD, _up_axis(rr, gravity), static=True)
+        rec.log(DESCRIPTION, rr.TextDocument(
+            f"warpsim run of scene {name!r}: {columns.size} spheres, {frames.size} recorded "
+            f"frames {frames[0]}..{frames[-1]}, dt = {dt!r} s, "
+            f"{0 if boxes is None else len(boxes)} obstacles. "
+            f"{getattr(scene, 'description', '')}".strip()), static=True)
+        if boxes is not None and len(boxes):
+            _log_obstacles(rr, rec, boxes)
+        radius = np.asarray(trajectory.radius, dtype=np.float64)[columns]
+        rec.log(SPHERES, rr.Points3D.from_fields(
+            radii=radius.astype(np.float32), colors=sphere_colors(written_ids),
+            labels=[f"sphere {i}" for i in written_ids], show_labels=False), static=True)
+        rec.log(SPHERES, rr.AnyValues(sphere=written_ids), static=True)
+        if columns.size:
+            rec.send_columns(SPHERES, indexes=_timelines(rr, frames, dt),
+                             columns=rr.Points3D.columns(positions=position.reshape(-1, 3))
+                             .partition(np.full(frames.size, columns.size)))
+        if events is not None and len(events):
+            size = (float(np.median(boxes.bounding_radius())) if boxes is not None and len(boxes)
+                    else float(np.max(radius, initial=0.0)) * 4.0)
+            _log_contacts(rr, rec, events, written_ids, frames, dt,
+                          max(size, 1e-6) * NORMAL_LENGTH_SHARE)
+        if scalars is not None:
+            for name, values in scalars.plots().items():
+                rec.send_columns(f"{PLOTS}/{name}", indexes=_timelines(rr, frames, dt),
+                                 columns=rr.Scalars.columns(
+                                     scalars=values[scalar_rows].astype(np.float64)))
+        rec.flush()
+        rec.disconnect()
+    return path
+
+
+def _usd_ids(path) -> tuple[np.ndarray | None, bool]:
+    """(swarm ids of a single-instancer file's spheres, sharded?) from the stage itself."""
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.Open(str(path), load=Usd.Stage.LoadNone)
+    instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Spheres"))
+    if not instancer:
+        return None, True
+    ids = instancer.GetIdsAttr().Get()
+    return (None if ids is None else np.asarray(ids, dtype=np.int64)), False
+
+
+def usd_to_rerun(usd_path, rrd_path, *, stride: int = 1, sample: int | None = None) -> Path:
+    """Convert a warpsim USD file (one written by ``write_usd``, or the root of a sharded run)
+    into a Rerun recording: the obstacles, the spheres with their swarm ids, the timelines.
+
+    A USD file holds neither contacts nor per-frame figures, so the recording has none.
+
+    Args:
+        usd_path: a ``.usdc``/``.usda`` written by warpsim. rrd_path: the ``.rrd`` to write.
+        stride, sample: as :func:`write_rerun`'s.
+
+    Raises:
+        FileNotFoundError: no file. ValueError: not a warpsim file, or a bad argument.
+        ModuleNotFoundError: rerun-sdk is missing.
+    """
+    from pxr import Usd
+
+    from . import read_usd, read_usd_boxes
+
+    usd_path = Path(usd_path)
+    if not usd_path.is_file():
+        raise FileNotFoundError(f"no USD file at {str(usd_path)!r}")
+    check_rerun_path(rrd_path)
+    require_rerun()
+    try:
+        ids, sharded = _usd_ids(usd_path)
+    except Exception as exc:  # pxr raises Tf.ErrorException with a multi-line message
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"USD could not read {str(usd_path)!r}: {first}") from None
+    if sharded:
+        from .layers import read_sharded_ids, read_sharded_usd
+
+        traj, ids = read_sharded_usd(usd_path), read_sharded_ids(usd_path)
+    else:
+        traj = read_usd(usd_path)
+    boxes = read_usd_boxes(usd_path)
+    world = Usd.Stage.Open(str(usd_path), load=Usd.Stage.LoadNone).GetPrimAtPath("/World")
+    name_attr = world.GetAttribute("warpsim:scene") if world else None
+    scene = _NamedBoxes(boxes, name_attr.Get() if name_attr else usd_path.stem)
+    return write_rerun(rrd_path, scene, traj, stride=stride, sample=sample, ids=ids)
+
+
+@dataclass
+class _NamedBoxes:
+    """What :func:`write_rerun` reads of a scene, for a file's obstacles: USD files are Y up."""
+
+    boxes: object
+    name: str
+    gravity: tuple = (0.0, -1.0, 0.0)
+    description: str = ""
+
+
+__all__ = ["FrameScalars", "check_rerun_path", "estimate_rerun_bytes", "require_rerun",
+           "run_with_scalars", "sphere_colors", "triangulated", "usd_to_rerun", "write_rerun"]
