@@ -24,6 +24,7 @@ __all__ = [
     "LargeOutputWarning",
     "check_writable",
     "draw_frame",
+    "estimate_rerun_bytes",
     "estimate_usd_bytes",
     "half_orientations",
     "read_usd",
@@ -32,6 +33,8 @@ __all__ = [
     "render_movie",
     "render_preview",
     "usd_format",
+    "usd_to_rerun",
+    "write_rerun",
     "write_usd",
 ]
 
@@ -41,4 +44,8 @@ def __getattr__(name):
         from .movie import render_movie
 
         return render_movie
+    if name in ("write_rerun", "usd_to_rerun", "estimate_rerun_bytes"):  # rerun-sdk: on use
+        from . import rerun
+
+        return getattr(rerun, name)
     raise AttributeError(f"module 'warpsim.export' has no attribute {name!r}")

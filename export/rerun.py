@@ -66,11 +66,15 @@ RESTING_COLOR = (150, 150, 150)
 NORMAL_LENGTH_SHARE = 0.1  # normal arrows: this share of the obstacles' median bounding radius
 CONTACT_RADIUS_UI = -3.0  # contact points 3 UI points wide whatever the zoom (Rerun: r < 0)
 
-# Size model fitted on written files (rerun-sdk 0.41, benchmarks/rerun_write.py): bytes =
-# fixed + per_frame F + N (per_sphere + F per_sphere_frame) + per_shape S + per_box K
-# + per_event E + per_event_frame (frames the contacts span).
-_SIZE_MODEL = {"fixed": 6_000, "per_frame": 60, "per_sphere": 40, "per_sphere_frame": 12,
-               "per_shape": 12_000, "per_box": 70, "per_event": 60, "per_event_frame": 16}
+# Size model fitted on written files (rerun-sdk 0.41, benchmarks/rerun_write.py), bytes: fixed
+# (the blueprint, the description) + per_sphere N + F (per_frame + N per_sphere_frame) + per
+# distinct obstacle shape (its chunk, and the rounded mesh's extra) + per_box K; with plots
+# plots_fixed + per_plot_frame F; with contacts contacts_fixed + per_event E + per_event_frame
+# (frames the contacts span: each has a row, empty or not).
+_SIZE_MODEL = {"fixed": 50_000, "per_sphere": 17, "per_frame": 18, "per_sphere_frame": 12,
+               "per_shape": 7_400, "per_rounded_shape": 4_500, "per_box": 25,
+               "plots_fixed": 29_000, "per_plot_frame": 72,
+               "contacts_fixed": 6_000, "per_event": 40, "per_event_frame": 40}
 
 
 def _rerun():
@@ -99,6 +103,42 @@ def check_rerun_path(path) -> Path:
             folder is missing or cannot be written.
     """
     return check_writable(path, (SUFFIX,), what="Rerun recording")
+
+
+def check_run_options(args) -> None:
+    """The command line's ``--rerun PATH`` and ``--rerun-sample K``, checked before a run: the
+    path ends in ``.rrd`` and can be written, rerun-sdk is installed, ``K >= 1``.
+
+    Raises:
+        ValueError: naming the option. ModuleNotFoundError: rerun-sdk is missing.
+    """
+    if args.rerun_sample is not None:
+        if args.rerun is None:
+            raise ValueError("--rerun-sample needs --rerun")
+        check.positive_int("rerun_sample", args.rerun_sample)
+    check_rerun_path(args.rerun)
+    require_rerun()
+
+
+def check_recording_size(args, scene, n_spheres: int, n_frames: int) -> int:
+    """Refuse, before a run, a recording estimated above ``--max-bytes``
+    (:func:`estimate_rerun_bytes` for the spheres and frames written, the scene's obstacles and
+    the plots; contacts are not known before the run and not counted).
+
+    Returns:
+        The estimate [bytes].
+
+    Raises:
+        ValueError: the estimate is above ``args.max_bytes``; the message says what to lower.
+    """
+    n = n_spheres if args.rerun_sample is None else min(n_spheres, args.rerun_sample)
+    estimate = estimate_rerun_bytes(n, n_frames, boxes=scene.boxes, scalars=True)
+    if estimate > args.max_bytes:
+        raise ValueError(f"{str(args.rerun)!r} would be about {estimate / 1e6:,.0f} MB ({n} "
+                         f"spheres x {n_frames} frames), above --max-bytes "
+                         f"{args.max_bytes:,.0f}: record fewer frames (--every, --start/--end) "
+                         f"or spheres (--spheres, --rerun-sample), or raise --max-bytes")
+    return estimate
 
 
 @dataclass(repr=False)
@@ -246,18 +286,21 @@ def _shape_table(boxes) -> tuple[np.ndarray, np.ndarray]:
     return rank[inverse.reshape(-1)], key[first[order]]
 
 
-def estimate_rerun_bytes(n_spheres: int, n_frames: int, *, boxes=None, events: int = 0,
-                         event_frames: int = 0) -> int:
+def estimate_rerun_bytes(n_spheres: int, n_frames: int, *, boxes=None, scalars: bool = False,
+                         events: int = 0, event_frames: int = 0) -> int:
     """Estimated size of a file written by :func:`write_rerun` [bytes].
 
-    A linear model fitted on written files (``benchmarks/rerun_write.py``): 12 B per sphere and
-    recorded frame (float32 positions; Rerun's chunks compress them little), a few tens of bytes
-    per sphere (radius, colour, label, id) and per recorded frame (timelines and plots), a mesh
-    per distinct obstacle shape (about 12 kB rounded, less sharp), and about 60 B per contact.
+    A linear model fitted on written files (``benchmarks/rerun_write.py``, within 10% of the
+    bundled scenes' recordings): 12 B per sphere and recorded frame (float32 positions, which
+    Rerun stores uncompressed), 17 B per sphere (radius, colour, label, id), 18 B per recorded
+    frame (its timelines), 7 kB per distinct obstacle shape (12 kB rounded) and 25 B per box,
+    72 B per recorded frame for the four plots, 40 B per contact and 40 B per frame the
+    contacts span, and about 50 kB of blueprint and description.
 
     Args:
         n_spheres: spheres written. n_frames: recorded frames written (after ``stride``).
         boxes: the obstacles (:class:`warpsim.RoundedBoxes` or a :class:`warpsim.Scene`), or None.
+        scalars: whether the per-frame plots are written.
         events: contacts written. event_frames: frames the contacts' timeline spans.
 
     Raises:
@@ -268,12 +311,17 @@ def estimate_rerun_bytes(n_spheres: int, n_frames: int, *, boxes=None, events: i
         raise ValueError(f"counts must be >= 0, got n_spheres={n_spheres}, n_frames={n_frames}, "
                          f"events={events}, event_frames={event_frames}")
     m = _SIZE_MODEL
-    total = (m["fixed"] + m["per_frame"] * f + n * (m["per_sphere"] + f * m["per_sphere_frame"])
-             + m["per_event"] * e + m["per_event_frame"] * ef)
+    total = m["fixed"] + n * m["per_sphere"] + f * (m["per_frame"] + n * m["per_sphere_frame"])
+    if scalars:
+        total += m["plots_fixed"] + m["per_plot_frame"] * f
+    if e:
+        total += m["contacts_fixed"] + m["per_event"] * e + m["per_event_frame"] * ef
     boxes = getattr(boxes, "boxes", boxes)
     if boxes is not None and len(boxes):
         _, shapes = _shape_table(boxes)
-        total += m["per_shape"] * len(shapes) + m["per_box"] * len(boxes)
+        rounded = int(np.count_nonzero(shapes[:, 3] > 0.0))
+        total += (m["per_shape"] * len(shapes) + m["per_rounded_shape"] * rounded
+                  + m["per_box"] * len(boxes))
     return int(total)
 
 
@@ -386,12 +434,11 @@ def _log_obstacles(rr, rec, boxes) -> None:
         points, triangles, normals = triangulated(*mesh)
         path = f"{OBSTACLES}/shape_{s:04d}"
         rec.log(path, rr.Mesh3D(vertex_positions=points, triangle_indices=triangles,
-                                vertex_normals=normals, albedo_factor=color), static=True)
-        rec.log(path, rr.InstancePoses3D(translations=boxes.center[members],
-                                         quaternions=boxes.rotation[members]), static=True)
-        rec.log(path, rr.AnyValues(box=members.astype(np.int64),
-                                   half_extents=np.tile(h, members.size),
-                                   rounding=np.full(members.size, rounding)), static=True)
+                                vertex_normals=normals, albedo_factor=color),
+                rr.InstancePoses3D(translations=boxes.center[members],
+                                   quaternions=boxes.rotation[members]),
+                rr.AnyValues(box=members.astype(np.int64), half_extents=np.tile(h, members.size),
+                             rounding=np.full(members.size, rounding)), static=True)
 
 
 def _timelines(rr, frames: np.ndarray, dt: float) -> list:
@@ -612,5 +659,6 @@ class _NamedBoxes:
     description: str = ""
 
 
-__all__ = ["FrameScalars", "check_rerun_path", "estimate_rerun_bytes", "require_rerun",
+__all__ = ["FrameScalars", "check_recording_size", "check_rerun_path", "check_run_options",
+           "estimate_rerun_bytes", "require_rerun",
            "run_with_scalars", "sphere_colors", "triangulated", "usd_to_rerun", "write_rerun"]

@@ -120,6 +120,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="after the run, compare K spheres with the exact reference")
     run.add_argument("--max-bytes", type=float, default=2e9,
                      help="refuse (before simulating) a file estimated larger [bytes]")
+    run.add_argument("--rerun", metavar="RUN.rrd",
+                     help="also write a Rerun recording: timeline, contacts, energy plots "
+                          "(needs warpsim[viewer]; see 'warpsim view')")
+    run.add_argument("--rerun-sample", type=int, metavar="K",
+                     help="with --rerun: record only K of the written spheres, evenly spread")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.add_argument("--dask", nargs="?", const="local", metavar="ADDRESS",
                      help="run in shards on a Dask cluster: a LocalCluster here, or the "
@@ -145,6 +150,20 @@ def build_parser() -> argparse.ArgumentParser:
     prev.add_argument("--elevation", type=float, default=30.0,
                       help="view height above the horizon [deg]")
     prev.add_argument("--no-progress", action="store_true", help="no progress bar (movie)")
+
+    view = sub.add_parser("view", help="open a .rrd, or a warpsim USD file, in the Rerun viewer "
+                                       "(needs warpsim[viewer]; analytics off)")
+    view.add_argument("file", help="a .rrd recording or a .usdc/.usda written by 'warpsim run'")
+    view.add_argument("--web", action="store_true",
+                      help="serve Rerun's web viewer on 127.0.0.1 instead of the native one")
+    view.add_argument("--port", type=int, default=0,
+                      help="with --web: the page's port (default: a free one)")
+    view.add_argument("--no-browser", action="store_true",
+                      help="with --web: print the address, do not open a browser")
+    view.add_argument("--every", type=int, default=1,
+                      help="USD files: one recorded frame in EVERY")
+    view.add_argument("--sample", type=int, metavar="K",
+                      help="USD files: only K spheres, evenly spread")
 
     sub.add_parser("bench", add_help=False,
                    help="measure throughput (see BENCHMARKS.md; 'warpsim bench --help')")
@@ -336,6 +355,10 @@ def _cmd_run(args) -> int:
         require_parquet()
     if args.error_sample is not None:
         check.positive_int("error_sample", args.error_sample)
+    if args.rerun is not None or args.rerun_sample is not None:
+        from .export.rerun import check_run_options
+
+        check_run_options(args)
     options = _run_options(args)
     check_device(args.device, args.debug_mode)
     subset = None if args.spheres is None else sphere_selection(args.spheres, len(swarm))
@@ -355,13 +378,24 @@ def _cmd_run(args) -> int:
                          f"({n_written} spheres x {n_records} frames), above --max-bytes "
                          f"{args.max_bytes:,.0f}: record fewer frames (--every, --start/--end) "
                          f"or spheres (--spheres), or raise --max-bytes")
+    if args.rerun is not None:
+        from .export.rerun import check_recording_size
+
+        check_recording_size(args, scene, n_written, n_records)
     print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "
           f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
           f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
     build = sim.build(events=bool(args.events))  # reported apart from the run's speed
     if start:
         sim.step(start)
-    traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
+    if args.rerun is not None:  # also samples the energy and the counters at each record
+        from .export.rerun import run_with_scalars
+
+        traj, scalars = run_with_scalars(sim, end - start, every=every,
+                                         progress=not args.no_progress,
+                                         energy_scale=_energy_scale(sim)[1], **options)
+    else:
+        traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
     state = sim.state()
     stats = sim.stats
     path = export.write_usd(out, scene, traj, spheres=subset, velocities=args.velocities,
@@ -380,6 +414,11 @@ def _cmd_run(args) -> int:
         lost = (f"; {events.dropped:,} dropped: the buffer was full, raise --events-capacity"
                 if events.dropped else "")
         print(f"wrote {events_path} ({len(events):,} contacts{lost})")
+    if args.rerun is not None:
+        rrd = export.write_rerun(args.rerun, scene, traj, spheres=subset,
+                                 sample=args.rerun_sample, scalars=scalars)
+        print(f"wrote {rrd} ({rrd.stat().st_size / 1e6:.1f} MB Rerun recording; "
+              f"'warpsim view {rrd}' opens it)")
     if args.error_sample is not None:
         from . import reference
 
@@ -439,7 +478,14 @@ def _cmd_accuracy(argv: list[str]) -> int:
     return accuracy.main(argv) or 0
 
 
-COMMANDS = {"run": _cmd_run, "scenes": _cmd_scenes, "preview": _cmd_preview}
+def _cmd_view(args) -> int:
+    from .export.rerun_viewer import view
+
+    return view(args.file, web=args.web, port=args.port, open_browser=not args.no_browser,
+                stride=args.every, sample=args.sample)
+
+
+COMMANDS = {"run": _cmd_run, "scenes": _cmd_scenes, "preview": _cmd_preview, "view": _cmd_view}
 FORWARDED = {"bench": _cmd_bench, "accuracy": _cmd_accuracy}  # parse their own options
 
 
