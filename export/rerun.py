@@ -29,8 +29,8 @@ Recording layout (application id ``warpsim``; world units are metres, the scene'
     description                TextDocument (static): scene, counts, time step
 
 Timelines: ``frame``, a sequence of integer simulation frames (frame ``k`` is the state after
-``k`` steps of ``dt``, as in :class:`warpsim.Trajectory`), and ``time``, a duration in seconds
-(``frame * dt``). Sphere orientations are not recorded (the points are round).
+``k`` steps of ``dt``, as in :class:`warpsim.Trajectory`), and ``time``, a duration
+(``frame * dt`` seconds, rounded to the nanosecond). Sphere orientations are not recorded (the points are round).
 """
 
 from __future__ import annotations
@@ -442,8 +442,9 @@ def _log_obstacles(rr, rec, boxes) -> None:
 
 
 def _timelines(rr, frames: np.ndarray, dt: float) -> list:
+    nanoseconds = np.round(frames.astype(np.float64) * dt * 1e9).astype(np.int64)
     return [rr.TimeColumn(FRAME, sequence=frames),
-            rr.TimeColumn(TIME, duration=frames.astype(np.float64) * dt)]
+            rr.TimeColumn(TIME, duration=nanoseconds.astype("timedelta64[ns]"))]
 
 
 def _log_contacts(rr, rec, events, ids: np.ndarray, frames: np.ndarray, dt: float,
