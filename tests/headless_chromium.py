@@ -10,16 +10,22 @@ client records every URL requested, console message and exception.
 from __future__ import annotations
 
 import base64
+import fcntl
 import json
 import os
 import select
 import shutil
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 from urllib.parse import urlsplit
 
+#: Started with the two pipe ends and Chromium's command line: puts the ends on descriptors 3
+#: and 4, where ``--remote-debugging-pipe`` expects them, then becomes Chromium.
+TRAMPOLINE = ("import os, sys; os.dup2(int(sys.argv[1]), 3); os.dup2(int(sys.argv[2]), 4); "
+              "os.execv(sys.argv[3], sys.argv[3:])")
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "[::1]", "::1")
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
@@ -37,6 +43,13 @@ def chromium_path() -> str | None:
     return None
 
 
+def _above_4(fd: int) -> int:
+    """The same pipe end under a descriptor number >= 10 (``fd`` is closed)."""
+    high = fcntl.fcntl(fd, fcntl.F_DUPFD, 10)
+    os.close(fd)
+    return high
+
+
 def is_loopback(url: str) -> bool:
     parts = urlsplit(url)
     if parts.scheme in ("data", "blob", "about", "chrome", "devtools"):
@@ -51,13 +64,16 @@ class Browser:
         self._folder = tempfile.TemporaryDirectory(prefix="warpsim-chromium-")
         to_child_r, self._to_child = os.pipe()
         self._from_child, from_child_w = os.pipe()
+        # the child's ends above 4, so that moving them to 3 and 4 never overwrites one
+        to_child_r, from_child_w = _above_4(to_child_r), _above_4(from_child_w)
         args = [executable, *FLAGS, f"--user-data-dir={self._folder.name}",
                 f"--window-size={size[0]},{size[1]}", "about:blank"]
-        script = f'exec "$@" 3<&{to_child_r} 4>&{from_child_w}'
-        self.process = subprocess.Popen(["/bin/sh", "-c", script, "sh", *args],
-                                        pass_fds=(to_child_r, from_child_w),
-                                        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                        stderr=subprocess.DEVNULL)
+        self.log = Path(self._folder.name) / "chromium.log"
+        with open(self.log, "wb") as log:
+            self.process = subprocess.Popen([sys.executable, "-c", TRAMPOLINE, str(to_child_r),
+                                             str(from_child_w), *args],
+                                            pass_fds=(to_child_r, from_child_w),
+                                            stdin=subprocess.DEVNULL, stdout=log, stderr=log)
         os.close(to_child_r)
         os.close(from_child_w)
         self._buffer = b""
@@ -69,6 +85,14 @@ class Browser:
         self.exceptions: list[str] = []
         self.session = None
 
+    def last_words(self) -> str:
+        """``": "`` and the last line Chromium printed, or ``""``."""
+        try:
+            lines = self.log.read_text(errors="replace").strip().splitlines()
+        except OSError:
+            return ""
+        return f": {lines[-1].strip()}" if lines else ""
+
     # -- protocol -------------------------------------------------------------------------
 
     def _send(self, method: str, params: dict | None = None, session: str | None = None) -> int:
@@ -76,7 +100,10 @@ class Browser:
         message = {"id": self._next_id, "method": method, "params": params or {}}
         if session:
             message["sessionId"] = session
-        os.write(self._to_child, json.dumps(message).encode() + b"\0")
+        try:
+            os.write(self._to_child, json.dumps(message).encode() + b"\0")
+        except BrokenPipeError:
+            raise RuntimeError(f"Chromium exited{self.last_words()}") from None
         return self._next_id
 
     def _read(self, timeout: float) -> dict | None:
@@ -86,7 +113,7 @@ class Browser:
                 return None
             chunk = os.read(self._from_child, 1 << 20)
             if not chunk:
-                raise RuntimeError("Chromium closed its DevTools pipe")
+                raise RuntimeError(f"Chromium closed its DevTools pipe{self.last_words()}")
             self._buffer += chunk
         raw, self._buffer = self._buffer.split(b"\0", 1)
         return json.loads(raw)
