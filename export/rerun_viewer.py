@@ -8,7 +8,11 @@ runs, on Linux, with ``XDG_CONFIG_HOME`` and ``XDG_DATA_HOME`` pointing into a f
 folder in which ``rerun analytics disable`` has been run first (checked before the viewer
 starts), so the user's own Rerun settings are neither read nor changed; elsewhere (where Rerun
 does not follow those variables) warpsim runs ``rerun analytics disable`` for the user, which
-Rerun keeps. Rerun's web viewer page, in the browser, posts the same events from the page
+Rerun keeps. The viewer also asks GitHub for Rerun's latest release at start (and Rerun's site
+for its examples), with no switch to turn that off: warpsim starts it with ``HTTP_PROXY``,
+``HTTPS_PROXY`` and ``ALL_PROXY`` naming a port of ``127.0.0.1`` it holds closed (bound, never
+listening), and ``NO_PROXY`` for the loopback addresses, so such requests are refused on the
+machine before any name is even looked up. Rerun's web viewer page, in the browser, posts the same events from the page
 itself (and asks the internet for Rerun's latest release and its examples) whatever that
 setting: warpsim therefore never hands the browser Rerun's server directly. It serves the page
 through its own small HTTP server on ``127.0.0.1`` (:class:`WebViewer`), which adds a
@@ -47,6 +51,8 @@ VIEWABLE = (SUFFIX, ".usdc", ".usda")
 START_TIMEOUT_S = 60.0  # the web viewer's ports open within a second or two here
 COMMAND_TIMEOUT_S = 60.0  # ``rerun analytics ...``: a fraction of a second
 POLL_S = 0.1
+PROXY_VARIABLES = ("HTTP_PROXY", "HTTPS_PROXY", "ALL_PROXY")
+NO_PROXY = "127.0.0.1,localhost,::1"
 UPSTREAM_TIMEOUT_S = 60.0  # one file of the viewer's page from Rerun's server (the wasm: 1 s)
 FONT_LINKS = re.compile(rb"<link[^>]*fonts\.(?:googleapis|gstatic)\.com[^>]*>", re.S)
 HEAD = re.compile(rb"<head[^>]*>", re.I)
@@ -99,8 +105,9 @@ def _analytics_config(env: dict) -> dict:
 
 @contextlib.contextmanager
 def viewer_environment():
-    """The environment for Rerun processes, with usage analytics disabled (module docstring),
-    and a private temporary folder (deleted on exit) for what they write.
+    """The environment for Rerun processes, with usage analytics disabled and every request to
+    another host than loopback refused on the machine (module docstring), and a private
+    temporary folder (deleted on exit) for what they write.
 
     Yields:
         ``(env, folder)``: a copy of ``os.environ`` to start processes with, and the folder.
@@ -110,8 +117,14 @@ def viewer_environment():
             turned off (then nothing is started).
     """
     exe = rerun_executable()
-    with tempfile.TemporaryDirectory(prefix="warpsim-rerun-") as folder:
+    with tempfile.TemporaryDirectory(prefix="warpsim-rerun-") as folder, \
+            socket.socket(socket.AF_INET, socket.SOCK_STREAM) as closed:
+        closed.bind((LOOPBACK, 0))  # bound, never listening: connections to it are refused
+        proxy = f"http://{LOOPBACK}:{closed.getsockname()[1]}"
         env = dict(os.environ)
+        for name in PROXY_VARIABLES:
+            env[name] = env[name.lower()] = proxy
+        env["NO_PROXY"] = env["no_proxy"] = NO_PROXY
         if sys.platform.startswith("linux"):
             env["XDG_CONFIG_HOME"] = str(Path(folder) / "config")
             env["XDG_DATA_HOME"] = str(Path(folder) / "data")
@@ -331,8 +344,8 @@ def view(path, *, web: bool = False, port: int = 0, open_browser: bool = True,
             recording = usd_to_rerun(path, folder / f"{path.stem}.rrd", stride=stride,
                                      sample=sample)
         if not web:
-            return subprocess.run([rerun_executable(), str(recording)], env=env,
-                                  stdin=subprocess.DEVNULL).returncode
+            return subprocess.run([rerun_executable(), str(recording), "--bind", LOOPBACK],
+                                  env=env, stdin=subprocess.DEVNULL).returncode
         with WebViewer(recording, env=env, port=port, log=folder / "viewer.log") as viewer:
             echo(f"Rerun web viewer for {path}: {viewer.url} (Ctrl-C stops it)")
             if open_browser:

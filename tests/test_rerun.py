@@ -359,3 +359,69 @@ def test_events_of_other_spheres_are_left_out(tmp_path):
                   "/world/contacts")
     np.testing.assert_array_equal(got["frame"], [0, 1, 2])
     assert [len(s) for s in got["sphere"]] == [0, 0, 1] and got["sphere"][2] == [1]
+
+
+def test_viewer_requests_to_other_hosts_go_to_a_closed_loopback_port(run, tmp_path):
+    """The native viewer's version check (GitHub) is sent to the proxy warpsim names: the
+    closed port refuses it on the machine. Shown here with a listening stand-in for it."""
+    import socket
+    import subprocess
+
+    from warpsim.export.rerun_viewer import PROXY_VARIABLES, rerun_executable, viewer_environment
+
+    scene, _, _, traj, _ = run
+    rrd = write_rerun(tmp_path / "run.rrd", scene, traj)
+    with viewer_environment() as (env, _), \
+            socket.socket(socket.AF_INET, socket.SOCK_STREAM) as stand_in:
+        closed = env["HTTPS_PROXY"]
+        assert closed.startswith("http://127.0.0.1:") and "127.0.0.1" in env["NO_PROXY"]
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            assert probe.connect_ex(("127.0.0.1", int(closed.rsplit(":", 1)[1]))) != 0
+        stand_in.bind(("127.0.0.1", 0))
+        stand_in.listen(4)
+        stand_in.settimeout(30.0)
+        address = f"http://127.0.0.1:{stand_in.getsockname()[1]}"
+        trial = dict(env, **{n: address for n in PROXY_VARIABLES},
+                     **{n.lower(): address for n in PROXY_VARIABLES})
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as spare:
+            spare.bind(("127.0.0.1", 0))
+            grpc = str(spare.getsockname()[1])
+        viewer = subprocess.Popen([rerun_executable(), str(rrd), "--headless", "--bind",
+                                   "127.0.0.1", "--port", grpc], env=trial,
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL)
+        try:
+            connection, _ = stand_in.accept()
+            with connection:
+                connection.settimeout(10.0)
+                request = connection.recv(4096).split(b"\r\n", 1)[0]
+        except TimeoutError:
+            pytest.skip("the headless viewer made no request within 30 s here")
+        finally:
+            viewer.kill()
+            viewer.wait()
+    assert request.startswith(b"CONNECT ") and b"127.0.0.1" not in request, request
+
+
+def test_view_web_serves_the_guarded_page_of_a_usd_file(run, tmp_path, monkeypatch, capsys):
+    import urllib.request
+
+    from warpsim.export.rerun_viewer import FETCH_GUARD, WebViewer
+
+    scene, _, _, traj, _ = run
+    usd = write_usd(tmp_path / "run.usdc", scene, traj)
+    pages = []
+
+    def fetch_instead_of_waiting(self):  # what a browser gets, then Ctrl-C
+        opener = urllib.request.build_opener(urllib.request.ProxyHandler({}))
+        with opener.open(self.url, timeout=30) as response:
+            pages.append((response.headers["Content-Security-Policy"], response.read()))
+        return 0
+
+    monkeypatch.setattr(WebViewer, "wait", fetch_instead_of_waiting)
+    assert cli.main(["view", str(usd), "--web", "--no-browser"]) == 0
+    out = capsys.readouterr().out
+    assert "http://127.0.0.1:" in out
+    policy, page = pages[0]
+    assert FETCH_GUARD in page and b"fonts.googleapis" not in page
+    assert "connect-src 'self' http://127.0.0.1:" in policy
