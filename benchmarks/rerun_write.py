@@ -10,7 +10,8 @@ and the per-frame figures sampled (:func:`warpsim.export.rerun.run_with_scalars`
 recording, and prints its size against :func:`warpsim.export.estimate_rerun_bytes`, the
 seconds to write it, and the simulation's wall time with the figures sampled against one plain
 ``Simulator.run`` (the sampling costs one launch per recorded frame). Writes
-``bench-results/rerun_write.json``. Needs the ``viewer`` extra.
+``bench-results/rerun_write.json`` (``rerun_write-quick.json`` with ``--quick``). Needs the
+``viewer`` extra.
 """
 
 from __future__ import annotations
@@ -62,7 +63,8 @@ def measure(name: str, frames: int, folder: Path) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="20 frames per scene")
-    parser.add_argument("--out", default="bench-results/rerun_write.json")
+    parser.add_argument("--out", help="JSON path (default: bench-results/rerun_write.json, "
+                                       "or rerun_write-quick.json)")
     args = parser.parse_args(argv)
     frames = QUICK_FRAMES if args.quick else FRAMES
     rows = []
@@ -76,7 +78,7 @@ def main(argv=None) -> int:
                   f"sampled {r['run_sampled_s']:.2f} s")
     worst = float(np.max(np.abs([r["error"] for r in rows])))
     print(f"largest estimate error: {worst:.1%}")
-    out = Path(args.out)
+    out = Path(args.out or f"bench-results/rerun_write{'-quick' if args.quick else ''}.json")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({"machine": platform.platform(), "frames": frames, "rows": rows},
                               indent=2))

@@ -30,7 +30,8 @@ Recording layout (application id ``warpsim``; world units are metres, the scene'
 
 Timelines: ``frame``, a sequence of integer simulation frames (frame ``k`` is the state after
 ``k`` steps of ``dt``, as in :class:`warpsim.Trajectory`), and ``time``, a duration
-(``frame * dt`` seconds, rounded to the nanosecond). Sphere orientations are not recorded (the points are round).
+(``frame * dt`` seconds, rounded to the nanosecond). Sphere orientations are not recorded
+(the points are round).
 """
 
 from __future__ import annotations
@@ -46,6 +47,7 @@ from .. import validation as check
 from ..trajectory import Trajectory
 from .files import atomic_output, check_writable
 from .mesh import box_mesh, rounded_box_mesh
+from .usd import OBSTACLE_COLOR, _selected, _shapes  # the USD writer's colour and rules
 
 SUFFIX = ".rrd"
 APPLICATION_ID = "warpsim"
@@ -274,18 +276,6 @@ def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False
 # Sizes
 
 
-def _shape_table(boxes) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct shapes in order of first use: (shape of each box (K,), shapes (S, 4) = half
-    extents and rounding). Equal means equal to the bit."""
-    key = np.ascontiguousarray(np.column_stack([boxes.half_extents, boxes.radius]))
-    _, first, inverse = np.unique(key.view(np.dtype((np.void, key.dtype.itemsize * 4))),
-                                  return_index=True, return_inverse=True)
-    order = np.argsort(first)
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    return rank[inverse.reshape(-1)], key[first[order]]
-
-
 def estimate_rerun_bytes(n_spheres: int, n_frames: int, *, boxes=None, scalars: bool = False,
                          events: int = 0, event_frames: int = 0) -> int:
     """Estimated size of a file written by :func:`write_rerun` [bytes].
@@ -318,7 +308,7 @@ def estimate_rerun_bytes(n_spheres: int, n_frames: int, *, boxes=None, scalars: 
         total += m["contacts_fixed"] + m["per_event"] * e + m["per_event_frame"] * ef
     boxes = getattr(boxes, "boxes", boxes)
     if boxes is not None and len(boxes):
-        _, shapes = _shape_table(boxes)
+        _, shapes = _shapes(boxes)
         rounded = int(np.count_nonzero(shapes[:, 3] > 0.0))
         total += (m["per_shape"] * len(shapes) + m["per_rounded_shape"] * rounded
                   + m["per_box"] * len(boxes))
@@ -422,10 +412,8 @@ def _blueprint(eye, target, up, plots: list[str]):
 
 
 def _log_obstacles(rr, rec, boxes) -> None:
-    from .usd import OBSTACLE_COLOR  # the USD's obstacle colour (linear RGB)
-
     color = _srgb(OBSTACLE_COLOR)
-    shape_of, shapes = _shape_table(boxes)
+    shape_of, shapes = _shapes(boxes)
     for s, shape in enumerate(shapes):
         members = np.flatnonzero(shape_of == s)
         h, rounding = shape[:3], float(shape[3])
@@ -477,28 +465,12 @@ def _log_contacts(rr, rec, events, ids: np.ndarray, frames: np.ndarray, dt: floa
 
 
 def _sphere_rows(trajectory: Trajectory, stride: int, spheres, sample):
-    """Validated (frame rows, columns of the trajectory) to write; the last row always kept."""
-    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
-        raise ValueError(f"stride must be an integer >= 1, got {stride!r}")
-    frame = np.asarray(trajectory.frame)
-    n_frames, n = len(frame), trajectory.position.shape[1]
-    if n_frames == 0:
-        raise ValueError("trajectory has no recorded frames")
-    if trajectory.position.shape != (n_frames, n, 3):
-        raise ValueError(f"trajectory.position must have shape ({n_frames}, N, 3), "
-                         f"got {trajectory.position.shape}")
-    if np.shape(trajectory.radius) != (n,):
-        raise ValueError(f"trajectory.radius must have shape ({n},), "
-                         f"got {np.shape(trajectory.radius)}")
-    if not (np.isfinite(trajectory.dt) and trajectory.dt > 0):
-        raise ValueError(f"trajectory.dt must be > 0, got {trajectory.dt!r}")
-    if (np.diff(frame) <= 0).any():
-        raise ValueError("trajectory.frame must be strictly increasing")
-    rows = np.unique(np.r_[np.arange(0, n_frames, stride), n_frames - 1])
-    columns = np.arange(n) if spheres is None else check.index_list("spheres", spheres, n)
+    """Validated (frame rows, columns of the trajectory) to write, as the USD writer selects
+    them (the last row always kept), then ``sample`` of the columns evenly spread."""
+    rows, columns = _selected(trajectory, stride, spheres)
     if sample is not None:
         sample = check.positive_int("sample", sample)
-        if sample < columns.size:  # evenly spread over the selection, first and last kept
+        if sample < columns.size:  # first and last kept
             columns = columns[np.unique(np.round(np.linspace(0, columns.size - 1, sample))
                                         .astype(np.int64))]
     return rows, columns

@@ -12,9 +12,9 @@ Rerun keeps. The viewer also asks GitHub for Rerun's latest release at start (an
 for its examples), with no switch to turn that off: warpsim starts it with ``HTTP_PROXY``,
 ``HTTPS_PROXY`` and ``ALL_PROXY`` naming a port of ``127.0.0.1`` it holds closed (bound, never
 listening), and ``NO_PROXY`` for the loopback addresses, so such requests are refused on the
-machine before any name is even looked up. Rerun's web viewer page, in the browser, posts the same events from the page
-itself (and asks the internet for Rerun's latest release and its examples) whatever that
-setting: warpsim therefore never hands the browser Rerun's server directly. It serves the page
+machine before any name is even looked up. Rerun's web viewer page, in the browser, posts the
+same events from the page itself (and asks the internet for Rerun's latest release and its
+examples) whatever that setting: warpsim therefore never hands the browser Rerun's server directly. It serves the page
 through its own small HTTP server on ``127.0.0.1`` (:class:`WebViewer`), which adds a
 Content-Security-Policy that lets the page connect to this machine's loopback address only,
 answers the page's requests to any other address in the page itself with an empty response
