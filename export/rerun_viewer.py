@@ -14,12 +14,12 @@ for its examples), with no switch to turn that off: warpsim starts it with ``HTT
 listening), and ``NO_PROXY`` for the loopback addresses, so such requests are refused on the
 machine before any name is even looked up. Rerun's web viewer page, in the browser, posts the
 same events from the page itself (and asks the internet for Rerun's latest release and its
-examples) whatever that setting: warpsim therefore never hands the browser Rerun's server directly. It serves the page
-through its own small HTTP server on ``127.0.0.1`` (:class:`WebViewer`), which adds a
-Content-Security-Policy that lets the page connect to this machine's loopback address only,
-answers the page's requests to any other address in the page itself with an empty response
-(a ``fetch`` wrapper run before Rerun's code), and drops the page's web-font links. Rerun's
-servers listen on ``127.0.0.1`` only.
+examples) whatever that setting: warpsim therefore never hands the browser Rerun's server
+directly. It serves the page through its own small HTTP server on ``127.0.0.1``
+(:class:`WebViewer`), which adds a Content-Security-Policy that lets the page connect to this
+machine's loopback address only, answers the page's requests to any other address in the page
+itself with an empty response (a ``fetch`` wrapper run before Rerun's code), and drops the
+page's web-font links. Rerun's servers listen on ``127.0.0.1`` only.
 
 rerun-sdk (which ships the ``rerun`` executable) is the optional ``viewer`` extra.
 """
