@@ -574,9 +574,10 @@ def _usd_ids(path) -> tuple[np.ndarray | None, bool]:
     from pxr import Usd, UsdGeom
 
     stage = Usd.Stage.Open(str(path), load=Usd.Stage.LoadNone)
-    instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Spheres"))
-    if not instancer:
-        return None, True
+    prim = stage.GetPrimAtPath("/World/Spheres")
+    instancer = UsdGeom.PointInstancer(prim)
+    if not instancer:  # a sharded root's Scope of instancers; no prim: read_usd says why
+        return None, bool(prim)
     ids = instancer.GetIdsAttr().Get()
     return (None if ids is None else np.asarray(ids, dtype=np.int64)), False
 

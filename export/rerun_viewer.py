@@ -344,8 +344,9 @@ def view(path, *, web: bool = False, port: int = 0, open_browser: bool = True,
             recording = usd_to_rerun(path, folder / f"{path.stem}.rrd", stride=stride,
                                      sample=sample)
         if not web:
-            return subprocess.run([rerun_executable(), str(recording), "--bind", LOOPBACK],
-                                  env=env, stdin=subprocess.DEVNULL).returncode
+            # --new: a viewer of its own (not one already listening, started otherwise)
+            return subprocess.run([rerun_executable(), str(recording), "--bind", LOOPBACK,
+                                   "--new"], env=env, stdin=subprocess.DEVNULL).returncode
         with WebViewer(recording, env=env, port=port, log=folder / "viewer.log") as viewer:
             echo(f"Rerun web viewer for {path}: {viewer.url} (Ctrl-C stops it)")
             if open_browser:

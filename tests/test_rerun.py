@@ -289,7 +289,8 @@ def test_cli_option_errors_are_one_line(tmp_path, capsys):
     for argv, message in ((["--rerun", str(tmp_path / "x.txt")], ".rrd"),
                           (["--rerun-sample", "3"], "--rerun-sample needs --rerun"),
                           (["--rerun", str(tmp_path / "x.rrd"), "--rerun-sample", "0"],
-                           "rerun_sample")):
+                           "rerun_sample"),
+                          (["--dask", "--rerun", str(tmp_path / "x.rrd")], "--dask")):
         assert cli.main(["run", "room", "-n", "5", "--frames", "2", *argv]) == cli.EXIT_ERROR
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1

@@ -337,6 +337,9 @@ def _cmd_run(args) -> int:
 
     scene = ws.Scene.load(args.scene)
     if args.dask is not None or args.shards is not None or args.block is not None:
+        if args.rerun is not None:
+            raise ValueError("--rerun does not run with --dask: open the sharded USD with "
+                             "'warpsim view OUT.usdc' (it converts it)")
         from . import distributed  # sharded: the spheres are drawn on the workers
 
         print(distributed.run_command(args, scene))
