@@ -419,3 +419,33 @@ def test_view_web_serves_the_guarded_page_of_a_usd_file(run, tmp_path, monkeypat
     policy, page = pages[0]
     assert FETCH_GUARD in page and b"fonts.googleapis" not in page
     assert "connect-src 'self' http://127.0.0.1:" in policy
+
+
+def test_readme_viewer_commands_run(tmp_path, monkeypatch, capsys):
+    """The README's viewer commands, as printed: the run writes both files; ``view --web``
+    serves them (the browser it would open and the wait for Ctrl-C are stood in for)."""
+    import re
+    import shlex
+    import webbrowser
+    from pathlib import Path
+
+    from warpsim.export.rerun_viewer import WebViewer
+
+    readme = Path(__file__).resolve().parents[1] / "README.md"
+    if not readme.is_file():
+        pytest.skip("README.md not present (installed package)")
+    section = readme.read_text(encoding="utf-8").split("## Interactive viewer", 1)[1]
+    block = re.search(r"```bash\n(.*?)```", section, flags=re.S).group(1)
+    commands = [shlex.split(line.split("#", 1)[0]) for line in block.strip().splitlines()]
+    assert [c[:2] for c in commands] == [["warpsim", "run"], ["warpsim", "view"],
+                                          ["warpsim", "view"]]
+    monkeypatch.chdir(tmp_path)
+    opened = []
+    monkeypatch.setattr(webbrowser, "open", opened.append)
+    monkeypatch.setattr(WebViewer, "wait", lambda self: 0)
+    assert cli.main(commands[0][1:] + ["--no-progress"]) == 0
+    assert (tmp_path / "room.rrd").is_file() and (tmp_path / "room.usdc").is_file()
+    assert (tmp_path / "hits.parquet").is_file()
+    assert cli.main(commands[2][1:]) == 0
+    assert opened and opened[0].startswith("http://127.0.0.1:")
+    assert opened[0] in capsys.readouterr().out
