@@ -66,6 +66,7 @@ SPHERE_SATURATION, SPHERE_VALUE = 0.65, 0.95
 BOUNCE_COLOR = (255, 120, 30)
 RESTING_COLOR = (150, 150, 150)
 NORMAL_LENGTH_SHARE = 0.1  # normal arrows: this share of the obstacles' median bounding radius
+ENERGY_FLOOR = 1e-30  # [J] smallest default energy scale: a sphere of zero energy divides by it
 CONTACT_RADIUS_UI = -3.0  # contact points 3 UI points wide whatever the zoom (Rerun: r < 0)
 
 # Size model fitted on written files (rerun-sdk 0.41, benchmarks/rerun_write.py), bytes: fixed
@@ -152,7 +153,7 @@ class FrameScalars:
         energy: total energy of the swarm [J], (R,) float64 (:meth:`Simulator.mechanical_energy`).
         energy_drift: the largest per-sphere change of energy since the start, relative to each
             sphere's ``energy_scale`` (the command line's: the energy above the lowest obstacle),
-            (R,) float64; 0 at the start.
+            (R,) float64; 0 at frame 0.
         bounces: contacts taken since the previous recorded frame, all spheres (resting contacts
             included, as :attr:`Stats.bounces` counts them), (R,) int64; 0 at the first.
         capped: sphere-frames stopped by ``max_bounces`` since the previous recorded frame,
@@ -213,7 +214,7 @@ def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False
         frames: frames to advance, >= 1. every: record one frame in ``every``, >= 1.
         progress: one tqdm progress bar on standard error for the whole run.
         energy_scale: per-sphere energy scale [J], (N,), dividing the energy changes of
-            ``energy_drift``; None: ``max(|E0|, 1e-30)``.
+            ``energy_drift``; None: ``max(|E0|, ENERGY_FLOOR)``.
         options: more keywords of ``Simulator.run`` (``velocities``, ``events``,
             ``event_capacity``).
 
@@ -226,7 +227,7 @@ def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False
     frames = check.positive_int("frames", frames)
     every = check.positive_int("every", every)
     e0 = np.asarray(sim.initial_energy, dtype=np.float64)
-    scale = (np.maximum(np.abs(e0), 1e-30) if energy_scale is None
+    scale = (np.maximum(np.abs(e0), ENERGY_FLOOR) if energy_scale is None
              else np.asarray(energy_scale, dtype=np.float64))
     if scale.shape != e0.shape:
         raise ValueError(f"energy_scale must have shape {e0.shape}, got {scale.shape}")
