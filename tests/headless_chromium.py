@@ -189,8 +189,9 @@ class Browser:
                                                 "returnByValue": True})
         return result.get("result", {}).get("value")
 
-    def screenshot(self, path) -> Path:
-        data = self.call("Page.captureScreenshot", {"format": "png"})["data"]
+    def screenshot(self, path, timeout: float = 120.0) -> Path:
+        """A PNG of the page; a software-rendered page on a busy machine may take a minute."""
+        data = self.call("Page.captureScreenshot", {"format": "png"}, timeout=timeout)["data"]
         path = Path(path)
         path.write_bytes(base64.b64decode(data))
         return path

@@ -22,7 +22,7 @@ from headless_chromium import Browser, chromium_path, is_loopback  # noqa: E402
 from warpsim.export.rerun import sphere_colors, write_rerun  # noqa: E402
 from warpsim.export.rerun_viewer import WebViewer, viewer_environment  # noqa: E402
 
-LOAD_DEADLINE_S = 150.0  # the wasm viewer on a software rasteriser: about 40 s here
+LOAD_DEADLINE_S = 240.0  # the wasm viewer on a software rasteriser: 40 s here, more when busy
 POLL_S = 5.0
 SIZE = (1280, 800)
 #: The 3D view of the recording's layout: the left three quarters, below the top bar and above
