@@ -20,8 +20,9 @@ Recording layout (application id ``warpsim``; world units are metres, the scene'
                                at every recorded frame
     world/contacts             Points3D at the contact centres of each frame (only that frame's:
                                an empty list at frames without contacts), bounces orange and
-                               resting contacts grey, with AnyValues ``sphere``, ``box``,
-                               ``fraction``, ``normal_speed`` [m/s] and ``resting`` per contact;
+                               supports grey, with AnyValues ``sphere``, ``box``,
+                               ``contact_time`` [s], ``normal_speed`` [m/s] and ``kind``
+                               (ContactKind) per contact;
                                world/contacts/normals: Arrows3D of the unit normals (a tenth of
                                the obstacles' median size long)
     plots/energy_drift, plots/energy, plots/bounces, plots/capped
@@ -47,7 +48,7 @@ from .. import validation as check
 from ..trajectory import Trajectory
 from .files import atomic_output, check_writable
 from .mesh import box_mesh, rounded_box_mesh
-from .usd import OBSTACLE_COLOR, _selected, _shapes  # the USD writer's colour and rules
+from .usd_write import OBSTACLE_COLOR, _selected, _shapes  # the USD writer's colour and rules
 
 SUFFIX = ".rrd"
 APPLICATION_ID = "warpsim"
@@ -64,7 +65,7 @@ ROUNDED_SEGMENTS = 4  # edges per quarter circle of rounded edges (7 kB a shape;
 GOLDEN = 0.6180339887498949  # hue step between consecutive sphere ids: neighbours differ
 SPHERE_SATURATION, SPHERE_VALUE = 0.65, 0.95
 BOUNCE_COLOR = (255, 120, 30)
-RESTING_COLOR = (150, 150, 150)
+SUPPORT_COLOR = (150, 150, 150)
 NORMAL_LENGTH_SHARE = 0.1  # normal arrows: this share of the obstacles' median bounding radius
 ENERGY_FLOOR = 1e-30  # [J] smallest default energy scale: a sphere of zero energy divides by it
 CONTACT_RADIUS_UI = -3.0  # contact points 3 UI points wide whatever the zoom (Rerun: r < 0)
@@ -189,17 +190,6 @@ class FrameScalars:
                 "bounces": self.bounces, "capped": self.capped}
 
 
-def _concatenate_events(parts: list):
-    from ..events import ContactEvents
-
-    if not parts:
-        return None
-    fields = ("frame", "fraction", "sphere", "box", "position", "normal", "normal_speed",
-              "resting")
-    return ContactEvents(**{f: np.concatenate([getattr(p, f) for p in parts]) for f in fields},
-                         dropped=sum(p.dropped for p in parts))
-
-
 def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False,
                      energy_scale=None, **options) -> tuple[Trajectory, FrameScalars]:
     """:meth:`Simulator.run` that also samples :class:`FrameScalars` at each recorded frame.
@@ -223,6 +213,8 @@ def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False
         figures at its recorded frames.
     """
     from tqdm import tqdm
+
+    from ..events import ContactEvents
 
     frames = check.positive_int("frames", frames)
     every = check.positive_int("every", every)
@@ -265,7 +257,7 @@ def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False
     traj = Trajectory(frame=stacked("frame"), dt=first.dt, position=stacked("position"),
                       orientation=stacked("orientation"), radius=first.radius,
                       velocity=stacked("velocity"), angular_velocity=stacked("angular_velocity"),
-                      events=_concatenate_events(events))
+                      events=ContactEvents.concatenate(events) if events else None)
     energy, drift, bounces, capped = (np.array(column) for column in zip(*samples))
     scalars = FrameScalars(frame=traj.frame, energy=energy, energy_drift=drift,
                            bounces=np.diff(bounces, prepend=bounces[0]),
@@ -439,15 +431,18 @@ def _timelines(rr, frames: np.ndarray, dt: float) -> list:
 def _log_contacts(rr, rec, events, ids: np.ndarray, frames: np.ndarray, dt: float,
                   length: float) -> int:
     """Contacts of the written spheres, each at its own frame; returns how many."""
-    rows = np.flatnonzero(np.isin(events.sphere, ids) & (events.frame >= frames[0]))
-    rows = rows[np.argsort(events.frame[rows], kind="stable")]
+    from ..vocabulary import ContactKind
+
+    frame = contact_frames(events, dt)
+    rows = np.flatnonzero(np.isin(events.sphere, ids) & (frame >= frames[0]))
+    rows = rows[np.argsort(frame[rows], kind="stable")]
     if rows.size == 0:
         return 0
     first = int(frames[0])
-    span = np.arange(first, max(int(frames[-1]), int(events.frame[rows].max())) + 1)
-    lengths = np.bincount(events.frame[rows] - first, minlength=span.size)
-    resting = events.resting[rows]
-    colors = np.where(resting[:, None], np.array(RESTING_COLOR, dtype=np.uint8),
+    span = np.arange(first, max(int(frames[-1]), int(frame[rows].max())) + 1)
+    lengths = np.bincount(frame[rows] - first, minlength=span.size)
+    support = events.kind[rows] == ContactKind.SUPPORT
+    colors = np.where(support[:, None], np.array(SUPPORT_COLOR, dtype=np.uint8),
                       np.array(BOUNCE_COLOR, dtype=np.uint8))
     position = events.position[rows].astype(np.float32)
     indexes = _timelines(rr, span, dt)
@@ -456,13 +451,21 @@ def _log_contacts(rr, rec, events, ids: np.ndarray, frames: np.ndarray, dt: floa
                              radii=np.full(rows.size, CONTACT_RADIUS_UI, dtype=np.float32)
                              ).partition(lengths),
         *rr.AnyValues.columns(sphere=events.sphere[rows], box=events.box[rows].astype(np.int64),
-                              fraction=events.fraction[rows],
+                              contact_time=events.time[rows],
                               normal_speed=events.normal_speed[rows],
-                              resting=resting).partition(lengths)])
+                              kind=events.kind[rows].astype(np.int64)).partition(lengths)])
     rec.send_columns(NORMALS, indexes=indexes, columns=rr.Arrows3D.columns(
         origins=position, vectors=(events.normal[rows] * length).astype(np.float32),
         colors=colors).partition(lengths))
     return int(rows.size)
+
+
+def contact_frames(events, dt: float) -> np.ndarray:
+    """The frame of each contact, (E,) int64: the table's ``frame``, or for a table in
+    continuous time the frame whose step holds ``time`` (``floor(time / dt) + 1``)."""
+    if events.frame is not None:
+        return np.asarray(events.frame, dtype=np.int64)
+    return np.floor(np.asarray(events.time) / dt).astype(np.int64) + 1
 
 
 def _sphere_rows(trajectory: Trajectory, stride: int, spheres, sample):
@@ -497,8 +500,9 @@ def write_rerun(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres
             last kept), >= 1; None for all.
         ids: the swarm index of each sphere of the trajectory, (N,) (a trajectory read from a
             file with a subset); None: ``0 .. N - 1``. Colours and labels follow them.
-        events: a :class:`warpsim.events.ContactEvents` (its ``sphere`` are swarm indices);
-            None takes ``trajectory.events``. Only the written spheres' contacts are written.
+        events: a :class:`warpsim.ContactEvents` (its ``sphere`` are swarm indices; a table in
+            continuous time goes to the frame whose step holds each contact); None takes
+            ``trajectory.events``. Only the written spheres' contacts are written.
         scalars: :class:`FrameScalars` of the run (their frames must be recorded frames of the
             trajectory), plotted at the written frames; None for no plots.
 
@@ -599,7 +603,7 @@ def usd_to_rerun(usd_path, rrd_path, *, stride: int = 1, sample: int | None = No
     """
     from pxr import Usd
 
-    from . import read_usd, read_usd_boxes
+    from .usd_read import read_usd, read_usd_boxes
 
     usd_path = Path(usd_path)
     if not usd_path.is_file():
@@ -635,5 +639,5 @@ class _NamedBoxes:
 
 
 __all__ = ["FrameScalars", "check_recording_size", "check_rerun_path", "check_run_options",
-           "estimate_rerun_bytes", "require_rerun",
+           "contact_frames", "estimate_rerun_bytes", "require_rerun",
            "run_with_scalars", "sphere_colors", "triangulated", "usd_to_rerun", "write_rerun"]

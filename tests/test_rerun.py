@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import warpsim as ws
-from warpsim import cli
-from warpsim.events import ContactEvents
+from warpsim.apps import cli
+from warpsim import ContactEvents, ContactKind
 from warpsim.export import read_usd, write_usd
 
 rr = pytest.importorskip("rerun")
@@ -180,9 +180,9 @@ def test_contacts_on_the_timeline_match_the_events_table(run, tmp_path):
                                       events.position[rows].astype(np.float32))
         np.testing.assert_array_equal(got["sphere"][k], events.sphere[rows])
         np.testing.assert_array_equal(got["box"][k], events.box[rows])
-        np.testing.assert_array_equal(got["fraction"][k], events.fraction[rows])
+        np.testing.assert_array_equal(got["contact_time"][k], events.time[rows])
         np.testing.assert_array_equal(got["normal_speed"][k], events.normal_speed[rows])
-        np.testing.assert_array_equal(got["resting"][k], events.resting[rows])
+        np.testing.assert_array_equal(got["kind"][k], events.kind[rows])
     normals = columns(path, "/world/contacts/normals")
     lengths = [np.linalg.norm(np.array(v, dtype=np.float64).reshape(-1, 3), axis=1)
                for v in normals["Arrows3D:vectors"] if len(v)]
@@ -346,13 +346,19 @@ def test_events_of_other_spheres_are_left_out(tmp_path):
     traj = ws.Trajectory(frame=np.array([0, 1, 2]), dt=0.5, position=np.zeros((3, 2, 3)),
                          orientation=np.tile([0.0, 0.0, 0.0, 1.0], (3, 2, 1)),
                          radius=np.array([0.1, 0.1]))
-    events = ContactEvents(frame=[1, 2], fraction=[0.5, 0.25], sphere=[0, 1], box=[0, 0],
-                           position=[[0, 0, 0], [1, 1, 1]], normal=[[0, 1, 0], [0, 1, 0]],
-                           normal_speed=[1.0, 2.0], resting=[False, True])
+    columns_ = {"sphere": [0, 1], "box": [0, 0], "position": [[0, 0, 0], [1, 1, 1]],
+                "normal": [[0, 1, 0], [0, 1, 0]], "normal_speed": [1.0, 2.0],
+                "kind": [ContactKind.BOUNCE, ContactKind.SUPPORT]}
+    events = ContactEvents.of_frames(0.5, [1, 2], [0.5, 0.25], **columns_)
     got = columns(write_rerun(tmp_path / "x.rrd", None, traj, spheres=[1], events=events),
                   "/world/contacts")
     np.testing.assert_array_equal(got["frame"], [0, 1, 2])
     assert [len(s) for s in got["sphere"]] == [0, 0, 1] and got["sphere"][2] == [1]
+    # the same contacts in continuous time land on the frames whose steps hold them
+    timed = ContactEvents(time=events.time, **columns_)
+    again = columns(write_rerun(tmp_path / "y.rrd", None, traj, spheres=[1], events=timed),
+                    "/world/contacts")
+    assert again["sphere"] == got["sphere"] and again["contact_time"] == got["contact_time"]
 
 
 def test_viewer_requests_to_other_hosts_go_to_a_closed_loopback_port(run, tmp_path):

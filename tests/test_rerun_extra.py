@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import warpsim as ws
-from warpsim import cli
+from warpsim.apps import cli
 
 
 def test_missing_extra_names_it(monkeypatch, tmp_path, capsys):
