@@ -110,7 +110,7 @@ def test_spheres_equal_the_simulated_arrays_frame_by_frame(run, tmp_path):
     assert alone["Points3D:colors"] == [static["Points3D:colors"][2]]
 
 
-def test_size_estimate_is_within_15_percent_of_the_file(run, tmp_path):
+def test_size_estimate_is_at_most_4_percent_under_the_file(run, tmp_path):
     scene, _, _, traj, scalars = run
     events = traj.events
     path = ws.export.write_rerun(tmp_path / "run.rrd", scene, traj, scalars=scalars)
@@ -118,7 +118,7 @@ def test_size_estimate_is_within_15_percent_of_the_file(run, tmp_path):
     estimate = ws.export.estimate_rerun_bytes(traj.sphere_count, len(traj), boxes=scene,
                                               scalars=True, events=len(events),
                                               event_frames=span)
-    assert abs(estimate / os.path.getsize(path) - 1.0) < 0.15
+    assert -0.04 <= estimate / os.path.getsize(path) - 1.0 < 0.15
 
 
 def test_stride_and_sample_keep_the_last_frame_and_spread_spheres(run, tmp_path):
