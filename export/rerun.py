@@ -68,6 +68,9 @@ BOUNCE_COLOR = (255, 120, 30)
 SUPPORT_COLOR = (150, 150, 150)
 NORMAL_LENGTH_SHARE = 0.1  # normal arrows: this share of the obstacles' median bounding radius
 ENERGY_FLOOR = 1e-30  # [J] smallest default energy scale: a sphere of zero energy divides by it
+CAMERA_PERCENTILES = (2.0, 98.0)  # the spheres' region, its outliers left out
+CAMERA_HEIGHT = 0.5  # first eye: this share of the region's half height above its centre
+CAMERA_MIN_HALF = 1e-3  # [m] half size of the region of a single sphere
 CONTACT_RADIUS_UI = -3.0  # contact points 3 UI points wide whatever the zoom (Rerun: r < 0)
 
 # Size model fitted on written files (rerun-sdk 0.41, benchmarks/rerun_write.py), bytes: fixed
@@ -352,11 +355,10 @@ def triangulated(points, counts, indices) -> tuple[np.ndarray, np.ndarray, np.nd
     normals = np.zeros_like(points)
     for k in range(3):
         np.add.at(normals, triangles[:, k], face)
-    size = np.linalg.norm(normals, axis=1)
-    fallback = points / np.maximum(np.linalg.norm(points, axis=1), 1e-300)[:, None]
-    fallback[np.linalg.norm(points, axis=1) == 0.0] = (0.0, 1.0, 0.0)
-    normals = np.where((size > 0.0)[:, None], normals / np.maximum(size, 1e-300)[:, None],
-                       fallback)
+    size = np.linalg.norm(normals, axis=1, keepdims=True)
+    reach = np.linalg.norm(points, axis=1, keepdims=True)
+    fallback = np.where(reach > 0.0, points / np.where(reach > 0.0, reach, 1.0), (0.0, 1.0, 0.0))
+    normals = np.where(size > 0.0, normals / np.where(size > 0.0, size, 1.0), fallback)
     return points.astype(np.float32), triangles.astype(np.uint32), normals.astype(np.float32)
 
 
@@ -371,21 +373,21 @@ def _up_axis(rr, gravity):
 
 def _camera(gravity, position: np.ndarray, boxes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(eye, target, up) of the 3D view's first camera: at the upper corner of the region the
-    spheres fill at the first written frame (2nd to 98th percentile, so inside a closed room),
-    looking at its centre; the obstacles' bounds when there are no spheres."""
+    spheres fill at the first written frame (:data:`CAMERA_PERCENTILES`, so inside a closed
+    room), looking at its centre; the obstacles' bounds when there are no spheres."""
     up = -np.asarray(gravity, dtype=np.float64)
     up = up / np.linalg.norm(up) if np.any(up) else np.array([0.0, 1.0, 0.0])
     if position.size:
-        lo, hi = np.percentile(position, [2.0, 98.0], axis=0)
+        lo, hi = np.percentile(position, CAMERA_PERCENTILES, axis=0)
     elif boxes is not None and len(boxes):
         reach = boxes.bounding_radius()[:, None]
         lo, hi = (boxes.center - reach).min(axis=0), (boxes.center + reach).max(axis=0)
     else:
         lo, hi = -np.ones(3), np.ones(3)
-    center, half = (lo + hi) / 2.0, np.maximum((hi - lo) / 2.0, 1e-3)
+    center, half = (lo + hi) / 2.0, np.maximum((hi - lo) / 2.0, CAMERA_MIN_HALF)
     axis = int(np.argmax(np.abs(up)))
     offset = half.copy()
-    offset[axis] = half[axis] * 0.5 * np.sign(up[axis])
+    offset[axis] = half[axis] * CAMERA_HEIGHT * np.sign(up[axis])
     return center + offset, center, up
 
 

@@ -455,3 +455,25 @@ def test_readme_viewer_commands_run(tmp_path, monkeypatch, capsys):
     assert cli.main(commands[2][1:]) == 0
     assert opened and opened[0].startswith("http://127.0.0.1:")
     assert opened[0] in capsys.readouterr().out
+
+
+def test_mesh_normals_point_out_of_the_box():
+    """Triangulated obstacle meshes: a sharp box's vertex normals are its face axes; a rounded
+    box's are near the exact outward normal ``(p - clamp(p, -h, h)) / r``, and every triangle
+    turns counter-clockwise seen from outside."""
+    from warpsim.export.mesh import box_mesh, rounded_box_mesh
+    from warpsim.export.rerun import triangulated
+
+    h = np.array([0.4, 0.1, 0.25])
+    points, triangles, normals = triangulated(*box_mesh(h))
+    assert triangles.shape == (12, 3)
+    np.testing.assert_allclose(np.abs(normals).max(axis=1), 1.0, atol=1e-6)  # a face axis each
+    np.testing.assert_allclose(np.sign(points * normals).max(axis=1), 1.0)  # pointing out
+    r = 0.05
+    points, triangles, normals = triangulated(*rounded_box_mesh(h, r, 4))
+    exact = (points - np.clip(points, -h, h)) / r
+    cosine = np.einsum("ij,ij->i", normals, exact / np.linalg.norm(exact, axis=1)[:, None])
+    assert cosine.min() > np.cos(np.radians(25.0))  # within a facet's angle (90 / 4 degrees)
+    a, b, c = (points[triangles[:, k]].astype(np.float64) for k in range(3))
+    centre = (a + b + c) / 3.0
+    assert (np.einsum("ij,ij->i", np.cross(b - a, c - a), centre) > 0.0).all()
