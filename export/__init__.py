@@ -17,6 +17,7 @@ _HOMES = {
     "estimate_rerun_bytes": "rerun",  # rerun-sdk (the viewer extra) is imported when writing
     "estimate_usd_bytes": "usd_write",
     "half_orientations": "usd_write",
+    "obstacles_from_usd": "stage_in",
     "read_usd": "usd_read",
     "read_usd_boxes": "usd_read",
     "read_usd_frame": "usd_read",

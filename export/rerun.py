@@ -67,7 +67,6 @@ SPHERE_SATURATION, SPHERE_VALUE = 0.65, 0.95
 BOUNCE_COLOR = (255, 120, 30)
 SUPPORT_COLOR = (150, 150, 150)
 NORMAL_LENGTH_SHARE = 0.1  # normal arrows: this share of the obstacles' median bounding radius
-ENERGY_FLOOR = 1e-30  # [J] smallest default energy scale: a sphere of zero energy divides by it
 CAMERA_PERCENTILES = (2.0, 98.0)  # the spheres' region, its outliers left out
 CAMERA_HEIGHT = 0.5  # first eye: this share of the region's half height above its centre
 CAMERA_MIN_HALF = 1e-3  # [m] half size of the region of a single sphere
@@ -156,8 +155,8 @@ class FrameScalars:
         frame: the recorded frames, (R,) int64 (those of the trajectory).
         energy: total energy of the swarm [J], (R,) float64 (:meth:`Simulator.mechanical_energy`).
         energy_drift: the largest per-sphere change of energy since the start, relative to each
-            sphere's ``energy_scale`` (the command line's: the energy above the lowest obstacle),
-            (R,) float64; 0 at frame 0.
+            sphere's energy above the scene's lowest point (:func:`warpsim.energy.relative_change`,
+            the scale of the run's summary), (R,) float64; 0 at frame 0.
         bounces: contacts taken since the previous recorded frame, all spheres (resting contacts
             included, as :attr:`Stats.bounces` counts them), (R,) int64; 0 at the first.
         capped: sphere-frames stopped by ``max_bounces`` since the previous recorded frame,
@@ -194,7 +193,7 @@ class FrameScalars:
 
 
 def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False,
-                     energy_scale=None, **options) -> tuple[Trajectory, FrameScalars]:
+                     start=None, **options) -> tuple[Trajectory, FrameScalars]:
     """:meth:`Simulator.run` that also samples :class:`FrameScalars` at each recorded frame.
 
     The run is made of one ``sim.run`` per recorded interval (``every`` frames, the last one
@@ -206,8 +205,8 @@ def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False
         sim: a :class:`warpsim.Simulator`.
         frames: frames to advance, >= 1. every: record one frame in ``every``, >= 1.
         progress: one tqdm progress bar on standard error for the whole run.
-        energy_scale: per-sphere energy scale [J], (N,), dividing the energy changes of
-            ``energy_drift``; None: ``max(|E0|, ENERGY_FLOOR)``.
+        start: the swarm's start positions [m], (N, 3), which set the energy scale of
+            ``energy_drift`` (:mod:`warpsim.energy`, the summary's); None: the positions now.
         options: more keywords of ``Simulator.run`` (``velocities``, ``events``,
             ``event_capacity``).
 
@@ -217,20 +216,17 @@ def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False
     """
     from tqdm import tqdm
 
+    from ..energy import relative_change
     from ..events import ContactEvents
 
     frames = check.positive_int("frames", frames)
     every = check.positive_int("every", every)
-    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
-    scale = (np.maximum(np.abs(e0), ENERGY_FLOOR) if energy_scale is None
-             else np.asarray(energy_scale, dtype=np.float64))
-    if scale.shape != e0.shape:
-        raise ValueError(f"energy_scale must have shape {e0.shape}, got {scale.shape}")
+    start = sim.state().position if start is None else np.asarray(start, dtype=np.float64)
 
     def sample():
         stats = sim.stats
         energy = sim.mechanical_energy()
-        drift = float(np.max(np.abs(energy - e0) / scale)) if energy.size else 0.0
+        drift = (float(np.max(np.abs(relative_change(sim, start)))) if energy.size else 0.0)
         return float(energy.sum()), drift, stats.bounces, stats.capped
 
     samples = [sample()]
