@@ -49,6 +49,8 @@ from ..trajectory import Trajectory
 from .files import atomic_output, check_writable
 from .mesh import box_mesh, rounded_box_mesh
 from .usd_write import OBSTACLE_COLOR, _selected, _shapes  # the USD writer's colour and rules
+from .usd_write import SPHERES as USD_SPHERES
+from .usd_write import WORLD as USD_WORLD
 
 SUFFIX = ".rrd"
 APPLICATION_ID = "warpsim"
@@ -577,7 +579,7 @@ def _usd_ids(path) -> tuple[np.ndarray | None, bool]:
     from pxr import Usd, UsdGeom
 
     stage = Usd.Stage.Open(str(path), load=Usd.Stage.LoadNone)
-    prim = stage.GetPrimAtPath("/World/Spheres")
+    prim = stage.GetPrimAtPath(USD_SPHERES)
     instancer = UsdGeom.PointInstancer(prim)
     if not instancer:  # a sharded root's Scope of instancers; no prim: read_usd says why
         return None, bool(prim)
@@ -620,7 +622,7 @@ def usd_to_rerun(usd_path, rrd_path, *, stride: int = 1, sample: int | None = No
     else:
         traj = read_usd(usd_path)
     boxes = read_usd_boxes(usd_path)
-    world = Usd.Stage.Open(str(usd_path), load=Usd.Stage.LoadNone).GetPrimAtPath("/World")
+    world = Usd.Stage.Open(str(usd_path), load=Usd.Stage.LoadNone).GetPrimAtPath(USD_WORLD)
     name_attr = world.GetAttribute("warpsim:scene") if world else None
     scene = _NamedBoxes(boxes, name_attr.Get() if name_attr else usd_path.stem)
     return write_rerun(rrd_path, scene, traj, stride=stride, sample=sample, ids=ids)
