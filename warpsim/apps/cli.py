@@ -121,6 +121,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--max-memory", type=float,
                      help="refuse (before drawing the spheres) a run estimated to hold more "
                           "memory [bytes] (default: 80%% of the machine's)")
+    run.add_argument("--rerun", metavar="RUN.rrd",
+                     help="also write a Rerun recording: timeline, contacts, energy plots "
+                          "(needs warpsim[viewer]; see 'warpsim view')")
+    run.add_argument("--rerun-sample", type=int, metavar="K",
+                     help="with --rerun: record only K of the written spheres, evenly spread")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.add_argument("--dask", nargs="?", const="local", metavar="ADDRESS",
                      help="run in shards on a Dask cluster: a LocalCluster here, or the "
@@ -151,6 +156,20 @@ def build_parser() -> argparse.ArgumentParser:
     prev.add_argument("--elevation", type=float, default=30.0,
                       help="view height above the horizon [deg]")
     prev.add_argument("--no-progress", action="store_true", help="no progress bar (movie)")
+
+    view = sub.add_parser("view", help="open a .rrd, or a warpsim USD file, in the Rerun viewer "
+                                       "(needs warpsim[viewer]; analytics off)")
+    view.add_argument("file", help="a .rrd recording or a .usdc/.usda written by 'warpsim run'")
+    view.add_argument("--web", action="store_true",
+                      help="serve Rerun's web viewer on 127.0.0.1 instead of the native one")
+    view.add_argument("--port", type=int, default=0,
+                      help="with --web: the page's port (default: a free one)")
+    view.add_argument("--no-browser", action="store_true",
+                      help="with --web: print the address, do not open a browser")
+    view.add_argument("--every", type=int, default=1,
+                      help="USD files: one recorded frame in EVERY")
+    view.add_argument("--sample", type=int, metavar="K",
+                      help="USD files: only K spheres, evenly spread")
 
     sub.add_parser("bench", add_help=False,
                    help="measure throughput (see BENCHMARKS.md; 'warpsim bench --help')")
@@ -309,6 +328,9 @@ def _cmd_run(args) -> int:
     if sharded and stage_set is not None:
         raise ValueError("--dask: a scene whose obstacles come from a USD stage runs unsharded "
                          "(its result composes over the stage)")
+    if sharded and args.rerun is not None:
+        raise ValueError("--rerun does not run with --dask: open the sharded USD with "
+                         "'warpsim view OUT.usdc' (it converts it)")
     if sharded:
         print(_run_sharded(args, scene))  # sharded: the spheres are drawn on the workers
         return 0
@@ -329,6 +351,10 @@ def _cmd_run(args) -> int:
         require_parquet()
     if args.error_sample is not None:
         check.positive_int("error_sample", args.error_sample)
+    if args.rerun is not None or args.rerun_sample is not None:
+        from ..export.rerun import check_run_options
+
+        check_run_options(args)
     options = _run_options(args)
     # sizes first: the file and the memory the run will hold, before any sphere is drawn
     if scene.emitter is None:
@@ -347,6 +373,10 @@ def _cmd_run(args) -> int:
                          f"({n_written} spheres x {n_records} frames), above --max-bytes "
                          f"{args.max_bytes:,.0f}: record fewer frames (--every, --start/--end) "
                          f"or spheres (--spheres), or raise --max-bytes")
+    if args.rerun is not None:
+        from ..export.rerun import check_recording_size
+
+        check_recording_size(args, scene, n_written, n_records)
     check_memory(args, n, n_written, n_records, every, end - start, estimate)
     check_device(args.device, args.debug_mode)
     # the block draw of a sharded run, so that the same command with --shards or --dask
@@ -367,7 +397,14 @@ def _cmd_run(args) -> int:
     build = sim.build(events=bool(args.events))  # reported apart from the run's speed
     if start:
         sim.step(start)
-    traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
+    if args.rerun is not None:  # also samples the energy and the counters at each record
+        from ..export.rerun import run_with_scalars
+
+        traj, scalars = run_with_scalars(sim, end - start, every=every,
+                                         progress=not args.no_progress,
+                                         start=swarm.position, **options)
+    else:
+        traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
     state = sim.state()
     stats = sim.stats
     print(f"simulated {stats.frames} frames x {len(swarm)} spheres in {stats.seconds:.2f} s "
@@ -389,6 +426,12 @@ def _cmd_run(args) -> int:
                 if events.dropped else "")
         print(f"wrote {events_path} ({len(events):,} contacts{lost})")
 
+    def write_recording():
+        rrd = export.write_rerun(args.rerun, scene, traj, ids=traj.ids(),
+                                 sample=args.rerun_sample, scalars=scalars)
+        print(f"wrote {rrd} ({rrd.stat().st_size / 1e6:.1f} MB Rerun recording; "
+              f"'warpsim view {rrd}' opens it)")
+
     def compare():
         from ..analysis import error_report
 
@@ -399,6 +442,8 @@ def _cmd_run(args) -> int:
     outputs = [("USD file", write_scene)]
     if args.events is not None:
         outputs.append(("events file", write_events))
+    if args.rerun is not None:
+        outputs.append(("Rerun recording", write_recording))
     if args.error_sample is not None:
         outputs.append(("error sample", compare))
     return finish_outputs(outputs, args.debug_mode)
@@ -490,7 +535,14 @@ def _cmd_accuracy(argv: list[str]) -> int:
     return accuracy.main(argv) or 0
 
 
-COMMANDS = {"run": _cmd_run, "scenes": _cmd_scenes, "preview": _cmd_preview}
+def _cmd_view(args) -> int:
+    from ..export.rerun_viewer import view
+
+    return view(args.file, web=args.web, port=args.port, open_browser=not args.no_browser,
+                stride=args.every, sample=args.sample)
+
+
+COMMANDS = {"run": _cmd_run, "scenes": _cmd_scenes, "preview": _cmd_preview, "view": _cmd_view}
 FORWARDED = {"bench": _cmd_bench, "accuracy": _cmd_accuracy}  # parse their own options
 
 
