@@ -270,7 +270,7 @@ def test_a_file_value_gets_the_api_message_with_the_file_and_table(tmp_path, tab
 # --- one place, no cycles ----------------------------------------------------------------------
 
 CHECKED_MODULES = ("validation", "feasibility", "energy", "obstacles", "swarm", "scene",
-                   "scene_files", "emitter")
+                   "scene_files", "emitter", "footprint")
 
 
 def _imports_of(module: str) -> set[str]:

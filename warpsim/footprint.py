@@ -11,24 +11,26 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-#: Host bytes per sphere for drawing the swarm: the emitter's draws and their rejection test
-#: (measured peak: 535 B per sphere for the room, tracemalloc), the swarm's arrays included.
 SPAWN_BYTES = 560
-#: Host bytes per sphere the simulator keeps beside the device (masses, radii, energies, the
-#: energy figures of the summary): measured 170 B per sphere.
+"""Host bytes per sphere for drawing the swarm: the emitter's draws and their rejection test
+(measured peak: 535 B per sphere for the room, tracemalloc), the swarm's arrays included."""
 SIMULATOR_HOST_BYTES = 200
-#: Device scalars per sphere: two states (position, velocity, angular momentum: 3 each;
-#: orientation 4; energy 1), radius and mass.
+"""Host bytes per sphere the simulator keeps beside the device (masses, radii, energies, the
+energy figures of the summary): measured 170 B per sphere."""
 DEVICE_SCALARS = 2 * 14 + 2
-#: Device bytes per sphere of the per-sphere counters (contacts, capped frames: int32 each).
+"""Device scalars per sphere: two states (position, velocity, angular momentum: 3 each;
+orientation 4; energy 1), radius and mass."""
 COUNTER_BYTES = 8
-#: Bytes of one contact row: on the device (4 int32, 2 vec3 and 2 scalars), read out as
-#: float64/int64 columns, and as the table's columns (about twice that while it is sorted).
+"""Device bytes per sphere of the per-sphere counters (contacts, capped frames: int32 each)."""
 EVENT_DEVICE_SCALARS = 8
+"""Scalars of one contact row on the device: 2 vec3 (position, normal) and 2 scalars."""
 EVENT_DEVICE_FIXED = 16
+"""Bytes of one contact row's integers on the device: frame, sphere, box, kind (int32)."""
 EVENT_HOST_BYTES = 3 * 100
-#: Fraction of the machine's memory a run may plan to hold by default.
+"""Host bytes of one contact row: read out as float64/int64 columns (about 100 B), the table's
+columns, and a copy while it is sorted."""
 DEFAULT_MEMORY_FRACTION = 0.8
+"""Fraction of the machine's memory a run may plan to hold by default."""
 
 
 @dataclass(frozen=True)

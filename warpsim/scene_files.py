@@ -39,7 +39,8 @@ MAX_BOXES = 100_000
 far above any sensible scene, it turns a typo such as ``count = [1000, 1000, 1]`` (or two
 grids of 60 000) into an error, checked before a grid is expanded, instead of an
 out-of-memory."""
-MAX_GRID_BOXES = MAX_BOXES  # the former name
+MAX_GRID_BOXES = MAX_BOXES
+"""The former name of :data:`MAX_BOXES` (it bounded each grid; now the scene's total)."""
 
 TOP_KEYS = ("name", "description", "simulation", "physics", "box", "box_grid", "obstacles",
             "emitter")
