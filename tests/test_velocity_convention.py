@@ -76,6 +76,19 @@ def test_free_flight_is_the_parabola_from_the_users_velocity(device, precision, 
         assert np.abs(traj.position - want_p).max() < 1e-12
 
 
+def test_the_thrown_ball_of_the_readme():
+    """Thrown from 10 m at (1, 3, 0) m/s with the default settings (linear, 1/60 s) in float64:
+    after 1 s it is at (1, 10 + 3 - g / 2, 0) = (1, 8.095, 0) m to a few 1e-15 m, with the
+    velocity (1, 3 - g, 0) to the rounding of 120 half kicks."""
+    far = ws.RoundedBoxes(center=[[0.0, -100.0, 0.0]], half_extents=[[1.0, 1.0, 1.0]])
+    sim = ws.Simulator(ws.Scene(far), ws.Swarm([[0.0, 10.0, 0.0]], [[1.0, 3.0, 0.0]]),
+                       precision="float64")
+    sim.step(60)
+    s = sim.state()
+    assert np.abs(s.position[0] - [1.0, 13.0 - G / 2, 0.0]).max() < 5e-15
+    assert np.abs(s.velocity[0] - [1.0, 3.0 - G, 0.0]).max() < 120 * EPS["float64"] * G
+
+
 @pytest.mark.parametrize("motion", ["linear", "ballistic"])
 def test_restart_from_a_state_continues_bit_for_bit(device, precision, motion):
     """A run stopped, its state set on a new simulator and continued, ends in the same bits
