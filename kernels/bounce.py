@@ -154,7 +154,8 @@ def bounce_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
             its chord, mean velocity ``v + g dt / 2``). r: radius [m].
             m: mass [kg]. L: angular momentum [kg m^2/s]. energy: total energy [J] (see
             ``dynamics``). g: gravity [m/s^2] (the chord's half kicks, resting contacts, the
-            rise cut and the loss's potential). origin: potential reference point [m]. dt: frame duration [s].
+            rise cut and the loss's potential). origin: potential reference point [m].
+            dt: frame duration [s].
             friction: ``k_f`` [kg/s]. max_rot: ``|Rot|`` clamp [rad/s]. retention: kept
             fraction of kinetic energy per bounce. max_bounces: cap on contacts this frame (a
             launch value, not compiled in: the loop costs the same, and each cap would be a

@@ -9,8 +9,8 @@ the state's frame (at t = 0 the swarm's own), and the energy is ``E = 1/2 m |v|^
 origin)``. The linear frame moves from ``p`` to ``p + v dt + g dt^2 / 2`` (mean velocity ``v +
 g dt / 2``) and ends with ``v + g dt``: exactly the free-flight parabola at every frame, so the
 reset is the identity there (to rounding) and only corrects what contacts and rounding change.
-Resetting the mean velocity instead (the sheet's literal rule) would put back ``1/2 m g^2 dt^2
-/ 4`` every frame: balls hover at the top of their arc and free flight speeds up sideways.
+Resetting the mean velocity from ``E`` instead (the sheet's literal rule) would not be the
+identity in free flight: every flight would be disturbed, every frame.
 
 Variants come from :func:`frame_kernel`, keyed by what the scene needs, so a
 scene without spin runs a kernel with no spin code in it.
