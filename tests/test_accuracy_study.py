@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import closed_room
+from helpers import closed_room, with_velocity
 
 import warpsim as ws
 from warpsim.analysis import accuracy, error_report, reference
@@ -44,6 +44,7 @@ def measured_order(scene, swarm, rates) -> tuple[float, list[float]]:
     return float(np.polyfit(np.log(dts), np.log(errors), 1)[0]), errors
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("correction", [False, True], ids=["no-reset", "reset"])
 def test_float64_kernels_converge_to_the_reference_in_dt(correction):
     scene = non_chaotic_scene(correction)
@@ -60,6 +61,7 @@ def test_float64_kernels_converge_to_the_reference_in_dt(correction):
     assert errors[0] < 0.05  # 1/60 s: millimetres after a second of bounces, not metres
 
 
+@pytest.mark.slow
 def test_accuracy_quick_end_to_end_writes_json_and_plots(tmp_path):
     scene_file = tmp_path / "box.toml"
     scene_file.write_text("""

@@ -1,6 +1,6 @@
 """The user's velocity is the velocity: exact free flight, restarts, and hops on a flat floor.
 
-SPEC "Dynamics of one frame": a swarm's velocity is the velocity at t = 0 and a state's the
+README "What it models": a swarm's velocity is the velocity at t = 0 and a state's the
 velocity at the end of its frame, for both motion models. The linear model moves each frame
 along the chord of the exact free-flight parabola, so without contacts every frame lies on
 ``p0 + v0 t + g t^2 / 2`` and its velocity is ``v0 + g t``: both computed here in float64.

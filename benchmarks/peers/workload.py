@@ -25,6 +25,7 @@ from typing import Protocol
 import numpy as np
 
 import warpsim as ws
+from warpsim.energy import energy_scale, lowest_potential
 
 ROOM_HALF = np.array([2.0, 1.5, 2.0])
 """Half the inner size of the room [m]; the inner floor is the plane y = 0."""
@@ -227,9 +228,10 @@ def energy(work: Workload, position: np.ndarray, velocity: np.ndarray,
 
 def energy_drift(work: Workload, position: np.ndarray, velocity: np.ndarray,
                  step_velocity: bool = True) -> dict:
-    """Relative change of the total energy from the start, and the worst single sphere's
-    (``step_velocity`` as in :func:`energy`, for the start as for the end: each engine is
-    given the workload's velocity in its own convention).
+    """Relative change of the total energy from the start, and the worst single sphere's, on
+    the scale of :mod:`warpsim.energy` (each sphere's energy above the scene's lowest point);
+    ``step_velocity`` as in :func:`energy`, for the start as for the end: each engine is given
+    the workload's velocity in its own convention.
 
     Spheres whose state is not finite are left out of both (they count as escaped).
     """
@@ -238,8 +240,10 @@ def energy_drift(work: Workload, position: np.ndarray, velocity: np.ndarray,
     ok = np.isfinite(e1)
     if not ok.any():
         return {"total": None, "worst_sphere": None}
-    return {"total": float((e1[ok].sum() - e0[ok].sum()) / e0[ok].sum()),
-            "worst_sphere": float(np.max(np.abs(e1[ok] - e0[ok]) / e0[ok]))}
+    lowest = lowest_potential(work.gravity, work.boxes, work.position)
+    scale = energy_scale(e0, work.mass, lowest)[ok]
+    return {"total": float((e1[ok].sum() - e0[ok].sum()) / scale.sum()),
+            "worst_sphere": float(np.max(np.abs(e1[ok] - e0[ok]) / scale))}
 
 
 def reference_positions(work: Workload, sample: int, frames: int = ERROR_HORIZON_FRAMES):
