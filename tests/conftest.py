@@ -1,12 +1,37 @@
-"""Shared fixtures: the devices to test on and a tolerance table per precision."""
+"""Shared fixtures: the devices to test on and a tolerance table per precision.
+
+Hypothesis runs under a named profile (``HYPOTHESIS_PROFILE``): ``ci`` (the default) draws the
+same examples on every run (``derandomize=True``, no example database), so what the suite
+catches does not vary between runs or machines; ``wide`` draws fresh random examples each run,
+ten times as many in the tests that size themselves with :func:`examples`, for a search on
+demand (``HYPOTHESIS_PROFILE=wide python -m pytest tests``).
+"""
+
+import os
 
 import numpy as np
 import pytest
 import warp as wp
+from hypothesis import settings
 
 import warpsim  # noqa: F401  (sets Warp's log level before anything initialises it)
 
 wp.init()
+
+settings.register_profile("ci", derandomize=True, database=None, deadline=None,
+                          print_blob=True)
+settings.register_profile("wide", derandomize=False, deadline=None, print_blob=True)
+HYPOTHESIS_PROFILE = os.environ.get("HYPOTHESIS_PROFILE", "ci")
+settings.load_profile(HYPOTHESIS_PROFILE)
+
+#: How many times more examples the ``wide`` profile draws than ``ci``.
+WIDE_FACTOR = 10
+
+
+def examples(count: int) -> int:
+    """``count`` hypothesis examples under the ``ci`` profile, ``WIDE_FACTOR`` times more under
+    ``wide`` (for a test's ``@settings(max_examples=...)``)."""
+    return count * (WIDE_FACTOR if HYPOTHESIS_PROFILE == "wide" else 1)
 
 DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
 
