@@ -7,7 +7,7 @@ Run on demand, never in CI (each mutant rebuilds the Warp modules that contain i
 
 mutmut 2 (configured under ``[tool.mutmut]`` in ``pyproject.toml``: the files, the test subset)
 edits one source file in place per mutant (a flipped comparison, another constant, a swapped
-operator, ...), runs the subset, stops at its first failure and puts the file back. A mutant is
+operator, ...), runs that file's fast test subset (``SUBSETS``), stops at its first failure and puts the file back. A mutant is
 *killed* when a test fails, *survives* when all pass. The script runs mutmut under ``nice`` on
 one process, then prints a table per file and writes ``bench-results/mutation.json``; the
 surviving mutants are listed with their diffs (``mutmut show ID``) so that each gets a test or
@@ -22,12 +22,27 @@ import os
 import sqlite3
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from benchmarks.common import RESULTS
 
 CACHE = Path(".mutmut-cache")
 """mutmut's record of every mutant and its status (SQLite, in the working directory)."""
+
+PYTEST = "python -m pytest -x -q -p no:cacheprovider "
+
+#: The fast test subset per kernel file: tests that build only small kernels that contain the
+#: file's funcs (a cold Warp build per mutant dominates the time), then one end-to-end case.
+SUBSETS = {
+    "kernels/capsule.py": "tests/test_func_contracts.py "
+                          "tests/test_far_paths.py::test_point_sized_box_from_300_m",
+    "kernels/slab.py": "tests/test_func_contracts.py "
+                       "tests/test_far_paths.py::test_point_sized_box_from_300_m",
+    "kernels/rounded_box.py": "tests/test_reference.py "
+                              "tests/test_far_paths.py -k 'point_sized or edge_passes'",
+    "kernels/arc.py": "tests/test_arc_face_after_edge.py tests/test_arc_sweep.py",
+}
 
 KILLED = {"ok_killed"}
 SURVIVED = {"bad_survived"}
@@ -36,10 +51,15 @@ SURVIVED = {"bad_survived"}
 def run_mutmut(paths: list[str]) -> None:
     """``mutmut run`` over ``paths`` (one file at a time, low priority); exit codes 2/4/8 say
     that mutants survived or timed out, which is what the table reports."""
-    env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
-    for path in paths:
-        subprocess.run(["nice", "-n", "19", sys.executable, "-m", "mutmut", "run",
-                        "--paths-to-mutate", path, "--no-progress"], env=env, check=False)
+    with tempfile.TemporaryDirectory(prefix="mutation-kernels-") as kernel_cache:
+        # every mutant's modules go to a private kernel cache, removed afterwards
+        env = dict(os.environ, WARP_CACHE_PATH=kernel_cache,
+                   PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+        for path in paths:
+            runner = PYTEST + SUBSETS.get(path, SUBSETS["kernels/arc.py"])
+            subprocess.run(["nice", "-n", "19", sys.executable, "-m", "mutmut", "run",
+                            "--paths-to-mutate", path, "--runner", runner, "--no-progress"],
+                           env=env, check=False)
 
 
 def statuses() -> dict[str, dict[str, int]]:
