@@ -5,13 +5,14 @@ Run on demand, never in CI (each mutant rebuilds the Warp modules that contain i
     pip install -e ".[mutation]"
     python -m benchmarks.mutation kernels/capsule.py kernels/slab.py
 
-mutmut 2 (configured under ``[tool.mutmut]`` in ``pyproject.toml``: the files, the test subset)
-edits one source file in place per mutant (a flipped comparison, another constant, a swapped
-operator, ...), runs that file's fast test subset (``SUBSETS``), stops at its first failure and puts the file back. A mutant is
-*killed* when a test fails, *survives* when all pass. The script runs mutmut under ``nice`` on
-one process, then prints a table per file and writes ``bench-results/mutation.json``; the
-surviving mutants are listed with their diffs (``mutmut show ID``) so that each gets a test or
-a note in BENCHMARKS.md saying why it is equivalent.
+mutmut 2 (configured under ``[tool.mutmut]`` in ``pyproject.toml``) edits one source file in
+place per mutant (a flipped comparison, another constant, a swapped operator, ...), runs that
+file's fast test subset (``SUBSETS``), stops at its first failure and puts the file back. A
+mutant is *killed* when a test fails, *survives* when all pass. The script runs mutmut under
+``nice`` on one process, then prints a table per file and writes ``bench-results/mutation.json``;
+the surviving mutants are listed with their diffs (``mutmut show ID``) so that each gets a test or
+a note in BENCHMARKS.md saying why it is equivalent. Do not read ``.mutmut-cache`` while a
+run is going: mutmut's own lookups then fail ("Attribute Mutant.line is required").
 """
 
 from __future__ import annotations
