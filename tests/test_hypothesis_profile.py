@@ -3,7 +3,7 @@ demand."""
 
 import os
 
-from conftest import HYPOTHESIS_PROFILE, WIDE_FACTOR, examples
+from helpers import HYPOTHESIS_PROFILE, WIDE_FACTOR, examples
 from hypothesis import settings
 
 

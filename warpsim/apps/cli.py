@@ -10,20 +10,19 @@ paths can be written, the optional packages are there, the file will not be too 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import inspect
 import os
 import sys
 
 import numpy as np
+
+from .options import add_simulation_options
+from .startup import check_device, init_warp
 
 EXIT_ERROR = 1
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 USD_SUFFIXES = (".usdc", ".usda")
 EVENTS_SUFFIXES = (".parquet",)
-#: Energy floors below this [J] are treated as zero when scaling relative energy figures.
-ENERGY_SCALE_FLOOR = 1e-30
 #: Default for ``run --velocities``: off. Measured (benchmarks/usd_write.py): velocities add
 #: 12 B per sphere-frame in .usdc (24 B with spin) to the 12 B of a non-spinning sphere's
 #: position, doubling the per-frame data of most bundled scenes (the default room run, 400
@@ -56,7 +55,7 @@ def sphere_selection(text: str, count: int) -> np.ndarray:
     Raises:
         ValueError: a malformed selection, or indices out of ``range(count)``, naming them.
     """
-    from . import validation as check
+    from .. import validation as check
 
     text = text.strip()
     try:
@@ -79,7 +78,7 @@ def sphere_selection(text: str, count: int) -> np.ndarray:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import __version__
+    from .. import __version__
 
     parser = _Parser(prog="warpsim", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"warpsim {__version__}")
@@ -88,9 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="simulate a scene and write a USD animation")
-    run.add_argument("scene", help="bundled scene name (see 'warpsim scenes') or a .toml path")
-    run.add_argument("-n", "--count", type=int, help="number of spheres (default: the scene's)")
-    run.add_argument("--frames", type=int, help="frames to simulate (default: the scene's)")
+    add_simulation_options(run)
     run.add_argument("--start", type=int, default=0,
                      help="first frame written (the run still starts at frame 0)")
     run.add_argument("--end", type=int,
@@ -99,13 +96,6 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--dt", type=float, help="time step [s] (default: the scene's)")
     run.add_argument("--seed", type=int, help="emitter seed (default: the scene's)")
     run.add_argument("--max-bounces", type=int, help="contacts per sphere per frame")
-    run.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's)")
-    run.add_argument("--precision", default="float32", choices=("float32", "float64"))
-    run.add_argument("--broad-phase", default="auto", choices=("auto", "bvh", "brute"),
-                     help="candidate boxes per sphere: a BVH or all boxes (same results)")
-    run.add_argument("--motion", choices=("linear", "ballistic"),
-                     help="path within a frame: the chord or the exact parabola")
-    run.add_argument("--workers", type=int, help="CPU threads stepping the swarm")
     run.add_argument("-o", "--output", help="output .usdc or .usda (default: SCENE.usdc)")
     run.add_argument("--every", type=int, default=1, help="record one frame in EVERY")
     run.add_argument("--velocities", action=argparse.BooleanOptionalAction,
@@ -120,6 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="after the run, compare K spheres with the exact reference")
     run.add_argument("--max-bytes", type=float, default=2e9,
                      help="refuse (before simulating) a file estimated larger [bytes]")
+    run.add_argument("--rerun", metavar="RUN.rrd",
+                     help="also write a Rerun recording: timeline, contacts, energy plots "
+                          "(needs warpsim[viewer]; see 'warpsim view')")
+    run.add_argument("--rerun-sample", type=int, metavar="K",
+                     help="with --rerun: record only K of the written spheres, evenly spread")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.add_argument("--dask", nargs="?", const="local", metavar="ADDRESS",
                      help="run in shards on a Dask cluster: a LocalCluster here, or the "
@@ -146,6 +141,20 @@ def build_parser() -> argparse.ArgumentParser:
                       help="view height above the horizon [deg]")
     prev.add_argument("--no-progress", action="store_true", help="no progress bar (movie)")
 
+    view = sub.add_parser("view", help="open a .rrd, or a warpsim USD file, in the Rerun viewer "
+                                       "(needs warpsim[viewer]; analytics off)")
+    view.add_argument("file", help="a .rrd recording or a .usdc/.usda written by 'warpsim run'")
+    view.add_argument("--web", action="store_true",
+                      help="serve Rerun's web viewer on 127.0.0.1 instead of the native one")
+    view.add_argument("--port", type=int, default=0,
+                      help="with --web: the page's port (default: a free one)")
+    view.add_argument("--no-browser", action="store_true",
+                      help="with --web: print the address, do not open a browser")
+    view.add_argument("--every", type=int, default=1,
+                      help="USD files: one recorded frame in EVERY")
+    view.add_argument("--sample", type=int, metavar="K",
+                      help="USD files: only K spheres, evenly spread")
+
     sub.add_parser("bench", add_help=False,
                    help="measure throughput (see BENCHMARKS.md; 'warpsim bench --help')")
     sub.add_parser("accuracy", add_help=False,
@@ -153,58 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-@contextlib.contextmanager
-def _quiet_stderr(enabled: bool):
-    """Send file descriptor 2 to the null device: Warp's native code prints its start-up
-    warnings (no CUDA driver, say) with C ``fprintf``, which Python cannot intercept."""
-    if not enabled:
-        yield
-        return
-    sys.stderr.flush()
-    saved = os.dup(2)
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(null)
-
-
-def init_warp(debug: bool) -> None:
-    """Initialise Warp, silently unless ``debug`` (then with its messages and build lines)."""
-    import warp as wp
-
-    import warpsim  # noqa: F401  (sets Warp's log level)
-
-    if debug:
-        wp.config.log_level = wp.LOG_INFO
-    with _quiet_stderr(not debug):
-        wp.init()
-
-
-def check_device(name: str | None, debug: bool) -> None:
-    """Refuse an unavailable Warp device in one line, before anything is built (Warp's native
-    code prints its own CUDA errors while it looks for the device: silenced unless ``debug``).
-
-    Raises:
-        ValueError: naming the device.
-    """
-    if name is None:
-        return
-    import warp as wp
-
-    try:
-        with _quiet_stderr(not debug):
-            wp.get_device(name)
-    except Exception as exc:  # Warp raises RuntimeError or ValueError, with several lines
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ValueError(f"device {name!r} is not available: {first}") from None
-
-
 def _cmd_scenes(_args) -> int:
-    from .scene_files import list_scenes
+    from ..scene_files import list_scenes
 
     scenes = list_scenes()
     width = max(len(name) for name, _ in scenes)
@@ -213,92 +172,55 @@ def _cmd_scenes(_args) -> int:
     return 0
 
 
-def _energy_scale(sim) -> tuple[np.ndarray, np.ndarray]:
-    """Initial energies (N,) and each sphere's energy above the lowest point of the scene (N,),
-    the scale of relative energy figures (near 0: kept; 1: all of it) [J]."""
-    scene = sim.scene
-    g = scene.gravity
-    if len(scene.boxes) and np.any(g):
-        corners = scene.boxes.center + scene.boxes.bounding_radius()[:, None] * np.sign(g)
-        floor = corners[np.argmin(corners @ -g)]
-    else:
-        floor = sim.energy_origin
-    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
-    floor_potential = -sim.mass * ((floor - sim.energy_origin) @ g)
-    return e0, np.maximum(e0 - floor_potential, ENERGY_SCALE_FLOOR)
+def energy_line(sim, swarm, state) -> str:
+    """The summary's energy line, on the scale of :mod:`warpsim.energy`: the largest drift
+    (elastic scenes), or what the contacts took (``energy_retention < 1``: losing energy is the
+    model, not an error)."""
+    from ..energy import energy_scale, lowest_potential
 
-
-def energy_line(sim, state) -> str:
-    """The summary's energy line: the largest drift (elastic scenes), or what the contacts took
-    (``energy_retention < 1``: losing energy is the model, not an error)."""
-    e0, scale = _energy_scale(sim)
-    if not len(e0):
+    if not len(swarm):
         return "energy: no spheres"
-    energy = sim.mechanical_energy(state)
-    if sim.scene.energy_retention < 1.0:
+    scene = sim.scene
+    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
+    energy = np.asarray(sim.mechanical_energy(state), dtype=np.float64)
+    lowest = lowest_potential(scene.gravity, scene.boxes, swarm.position, sim.energy_origin)
+    scale = energy_scale(e0, sim.mass, lowest)
+    if scene.energy_retention < 1.0:
         lost = float(np.sum(e0 - energy) / np.sum(scale))
         gained = float(np.max((energy - e0) / scale))
-        line = (f"energy lost at contacts: {100.0 * lost:.1f}% of the energy above the lowest "
-                f"obstacle (energy_retention = {sim.scene.energy_retention:g})")
+        line = (f"energy lost at contacts: {100.0 * lost:.1f}% of the energy above the scene's "
+                f"lowest point (energy_retention = {scene.energy_retention:g})")
         return line + (f"; largest gain {gained:.2e} (relative)" if gained > 0.0 else "")
     drift = float(np.max(np.abs(energy - e0) / scale))
     return f"energy drift: {drift:.2e} (largest per sphere, relative)"
 
 
-def _accepts(function, name: str) -> bool:
-    try:
-        return name in inspect.signature(function).parameters
-    except (TypeError, ValueError):
-        return False
-
-
 def _run_options(args) -> dict:
-    """Keywords of ``Simulator.run`` asked for on the command line, checked to be supported by
-    this simulator before anything runs."""
-    import warpsim as ws
+    """Keywords of :meth:`warpsim.Simulator.run` asked for on the command line, checked before
+    anything runs."""
+    from .. import validation as check
 
     options = {}
     if args.velocities:
-        if not _accepts(ws.Simulator.run, "velocities"):
-            raise ValueError("--velocities: this simulator does not record velocities yet")
         options["velocities"] = True
     if args.events is not None:
-        if not _accepts(ws.Simulator.run, "events"):
-            raise ValueError("--events: this simulator does not record contact events yet")
         options["events"] = True
     if args.events_capacity is not None:
-        from . import validation as check
-
         if args.events is None:
             raise ValueError("--events-capacity needs --events")
-        check.positive_int("events_capacity", args.events_capacity)
-        name = next((k for k in ("event_capacity", "events_capacity")
-                     if _accepts(ws.Simulator.run, k)), None)
-        if name is None:
-            raise ValueError("--events-capacity: this simulator has no event capacity option")
-        options[name] = args.events_capacity
+        options["event_capacity"] = check.positive_int("events_capacity", args.events_capacity)
     return options
 
 
 def _simulator_options(args) -> dict:
-    """``motion`` and ``workers`` for :class:`warpsim.Simulator`, only when given (checked to
-    be supported before anything runs)."""
-    import warpsim as ws
-
-    options = {}
-    for name in ("motion", "workers"):
-        value = getattr(args, name)
-        if value is None:
-            continue
-        if not _accepts(ws.Simulator.__init__, name):
-            raise ValueError(f"--{name}: this simulator has no {name} option yet")
-        options[name] = value
-    return options
+    """``motion`` and ``workers`` for :class:`warpsim.Simulator`, only when given."""
+    return {name: getattr(args, name) for name in ("motion", "workers")
+            if getattr(args, name) is not None}
 
 
 def _frame_range(args, scene_frames: int) -> tuple[int, int]:
     """``(start, end)``: frames written, the run stopping at ``end``."""
-    from . import validation as check
+    from .. import validation as check
 
     frames = check.positive_int("frames", scene_frames if args.frames is None else args.frames)
     end = frames if args.end is None else check.positive_int("end", args.end)
@@ -310,17 +232,67 @@ def _frame_range(args, scene_frames: int) -> tuple[int, int]:
     return start, end
 
 
+def _run_sharded(args, scene):
+    """``warpsim run SCENE --dask [ADDRESS] [--shards N] [--block B]``:
+    :func:`warpsim.distributed.run` from the command line's options (``--shards`` or
+    ``--block`` without ``--dask`` shard in this process). ``--workers`` is the threads of each
+    shard's simulator.
+
+    Raises:
+        ValueError: an option a sharded run does not support, or a bad value (named).
+    """
+    from .. import distributed
+
+    for option, value in (("--spheres", args.spheres), ("--events", args.events),
+                          ("--events-capacity", args.events_capacity),
+                          ("--error-sample", args.error_sample)):
+        if value is not None:
+            raise ValueError(f"{option} is not supported with --dask/--shards (a sharded run "
+                             f"writes every sphere, one layer per shard)")
+    if args.frames is not None and args.end is not None and args.end > args.frames:
+        raise ValueError(f"--end {args.end} is past --frames {args.frames}")
+    end = args.end if args.end is not None else args.frames
+    if args.output is not None and not args.output.strip():
+        raise ValueError("output path (-o) is empty")
+    output = args.output if args.output is not None else f"{scene.name}.usdc"
+    client = args.dask
+    if client not in (None, distributed.LOCAL):
+        client = distributed.scheduler_address(client)
+    where = ("this process" if client is None
+             else "a local Dask cluster" if client == distributed.LOCAL
+             else f"the Dask scheduler at {client}")
+    n = scene.emitter.count if args.count is None and scene.emitter is not None else args.count
+    print(f"{scene.name}: {n} spheres, {len(scene.boxes)} obstacles, sharded on {where}",
+          file=sys.stderr)
+    block = distributed.DEFAULT_BLOCK if args.block is None else args.block
+    return distributed.run(scene, output, n=args.count, seed=args.seed, frames=end,
+                           start=args.start, every=args.every, client=client,
+                           shards=args.shards, block=block, threads=args.workers, dt=args.dt,
+                           max_bounces=args.max_bounces, device=args.device,
+                           precision=args.precision, broad_phase=args.broad_phase,
+                           velocities=bool(args.velocities), motion=args.motion,
+                           progress=not args.no_progress, max_bytes=args.max_bytes)
+
+
 def _cmd_run(args) -> int:
     import warpsim as ws
 
-    from . import validation as check
-    from .export.files import check_writable
+    from .. import validation as check
+    from ..export.files import check_writable
 
     scene = ws.Scene.load(args.scene)
-    if args.dask is not None or args.shards is not None or args.block is not None:
-        from . import distributed  # sharded: the spheres are drawn on the workers
-
-        print(distributed.run_command(args, scene))
+    stage_set = getattr(scene.boxes, "stage", None)  # obstacles read from a USD stage
+    if stage_set is not None:
+        print(stage_set.summary(), file=sys.stderr)
+    sharded = args.dask is not None or args.shards is not None or args.block is not None
+    if sharded and stage_set is not None:
+        raise ValueError("--dask: a scene whose obstacles come from a USD stage runs unsharded "
+                         "(its result composes over the stage)")
+    if sharded and args.rerun is not None:
+        raise ValueError("--rerun does not run with --dask: open the sharded USD with "
+                         "'warpsim view OUT.usdc' (it converts it)")
+    if sharded:
+        print(_run_sharded(args, scene))  # sharded: the spheres are drawn on the workers
         return 0
     swarm = scene.spawn(n=args.count, seed=args.seed)
     start, end = _frame_range(args, scene.frames)
@@ -329,13 +301,21 @@ def _cmd_run(args) -> int:
         raise ValueError("output path (-o) is empty")
     out = check_writable(args.output if args.output is not None else f"{scene.name}.usdc",
                          USD_SUFFIXES)
+    if stage_set is not None:
+        from ..export.compose import check_output
+
+        check_output(stage_set, out)
     if args.events is not None:
-        from .events import require_parquet
+        from ..events import require_parquet
 
         check_writable(args.events, EVENTS_SUFFIXES, what="events file")
         require_parquet()
     if args.error_sample is not None:
         check.positive_int("error_sample", args.error_sample)
+    if args.rerun is not None or args.rerun_sample is not None:
+        from ..export.rerun import check_run_options
+
+        check_run_options(args)
     options = _run_options(args)
     check_device(args.device, args.debug_mode)
     subset = None if args.spheres is None else sphere_selection(args.spheres, len(swarm))
@@ -343,7 +323,7 @@ def _cmd_run(args) -> int:
     sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
                        device=args.device, precision=args.precision,
                        broad_phase=args.broad_phase, **extra)
-    from . import export
+    from .. import export
 
     n_written = len(swarm) if subset is None else subset.size
     n_records = len(sorted(set(range(start, end + 1, every)) | {end}))
@@ -355,13 +335,24 @@ def _cmd_run(args) -> int:
                          f"({n_written} spheres x {n_records} frames), above --max-bytes "
                          f"{args.max_bytes:,.0f}: record fewer frames (--every, --start/--end) "
                          f"or spheres (--spheres), or raise --max-bytes")
+    if args.rerun is not None:
+        from ..export.rerun import check_recording_size
+
+        check_recording_size(args, scene, n_written, n_records)
     print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "
           f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
           f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
     build = sim.build(events=bool(args.events))  # reported apart from the run's speed
     if start:
         sim.step(start)
-    traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
+    if args.rerun is not None:  # also samples the energy and the counters at each record
+        from ..export.rerun import run_with_scalars
+
+        traj, scalars = run_with_scalars(sim, end - start, every=every,
+                                         progress=not args.no_progress,
+                                         start=swarm.position, **options)
+    else:
+        traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
     state = sim.state()
     stats = sim.stats
     path = export.write_usd(out, scene, traj, spheres=subset, velocities=args.velocities,
@@ -371,7 +362,7 @@ def _cmd_run(args) -> int:
           f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
     print(f"bounces: {stats.bounces:,} ({stats.bounces / max(stats.sphere_frames, 1):.3f} per "
           f"sphere-frame); capped: {stats.capped:,} sphere-frames, {stats.capped_spheres} spheres")
-    print(energy_line(sim, state))
+    print(energy_line(sim, swarm, state))
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {len(traj)} frames "
           f"{int(traj.frame[0])}..{int(traj.frame[-1])}, {n_written} spheres)")
     if args.events is not None:
@@ -380,23 +371,28 @@ def _cmd_run(args) -> int:
         lost = (f"; {events.dropped:,} dropped: the buffer was full, raise --events-capacity"
                 if events.dropped else "")
         print(f"wrote {events_path} ({len(events):,} contacts{lost})")
+    if args.rerun is not None:
+        rrd = export.write_rerun(args.rerun, scene, traj, spheres=subset,
+                                 sample=args.rerun_sample, scalars=scalars)
+        print(f"wrote {rrd} ({rrd.stat().st_size / 1e6:.1f} MB Rerun recording; "
+              f"'warpsim view {rrd}' opens it)")
     if args.error_sample is not None:
-        from . import reference
+        from ..analysis import error_report
 
-        report = reference.compare(sim, scene, swarm, sample=args.error_sample)
+        report = error_report.compare(sim, scene, swarm, sample=args.error_sample)
         print(report.summary())
     return 0
 
 
 def _cmd_preview(args) -> int:
-    from . import export
+    from .. import export
 
     if (args.output is None) == (args.movie is None):
         raise ValueError("preview needs -o IMAGE or --movie MOVIE (one of them)")
     angles = {"azimuth": args.azimuth, "elevation": args.elevation}
     if args.movie is not None:
-        from .export.files import check_writable
-        from .export.movie import check_movie_support, render_movie
+        from ..export.files import check_writable
+        from ..export.movie import check_movie_support, render_movie
 
         check_movie_support(args.movie)
         check_writable(args.movie, what="movie")
@@ -405,8 +401,8 @@ def _cmd_preview(args) -> int:
         print(f"wrote {path} ({args.size[0]}x{args.size[1]}, one recorded frame in "
               f"{args.every})")
         return 0
-    from .export.files import check_writable
-    from .export.preview import image_format
+    from ..export.files import check_writable
+    from ..export.preview import image_format
 
     image_format(args.output)
     check_writable(args.output, what="image")
@@ -417,29 +413,25 @@ def _cmd_preview(args) -> int:
 
 
 def _cmd_bench(argv: list[str]) -> int:
-    from . import bench as benchmark
+    from . import bench
 
-    if _accepts(benchmark.main, "prog"):
-        return benchmark.main(argv, prog="warpsim bench") or 0
-    saved = sys.argv[0]
-    sys.argv[0] = "warpsim bench"  # argparse's default prog
-    try:
-        return benchmark.main(argv) or 0
-    finally:
-        sys.argv[0] = saved
+    return bench.main(argv) or 0
 
 
 def _cmd_accuracy(argv: list[str]) -> int:
-    try:
-        from . import accuracy
-    except ImportError as exc:
-        if getattr(exc, "name", "") != f"{__package__}.accuracy":
-            raise
-        raise ValueError("the accuracy study is not part of this installation") from None
+    from ..analysis import accuracy
+
     return accuracy.main(argv) or 0
 
 
-COMMANDS = {"run": _cmd_run, "scenes": _cmd_scenes, "preview": _cmd_preview}
+def _cmd_view(args) -> int:
+    from ..export.rerun_viewer import view
+
+    return view(args.file, web=args.web, port=args.port, open_browser=not args.no_browser,
+                stride=args.every, sample=args.sample)
+
+
+COMMANDS = {"run": _cmd_run, "scenes": _cmd_scenes, "preview": _cmd_preview, "view": _cmd_view}
 FORWARDED = {"bench": _cmd_bench, "accuracy": _cmd_accuracy}  # parse their own options
 
 

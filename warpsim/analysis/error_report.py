@@ -1,4 +1,4 @@
-"""The error report: a run measured against the exact reference (:mod:`warpsim.reference`).
+"""The error report: a run measured against the exact reference (:mod:`warpsim.analysis.reference`).
 
 In a room full of plates, trajectories diverge exponentially from any perturbation, so a
 position error after ten seconds says nothing about a simulator. The report gives measures
@@ -12,9 +12,10 @@ that do:
 - **time to divergence**: how long [s] until a sphere's position error first exceeds 1 mm and
   1 cm (spheres that never do count as "beyond the horizon");
 - **energy** of the sample against the reference at the horizon (relative to each sphere's
-  energy above the scene's lowest point): with lossy contacts this is the energy figure;
-- **invariants** of the whole run: energy drift (relative to each sphere's energy above the
-  scene's lowest point; none with lossy contacts, whose energy falls by design), spheres that
+  energy above the scene's lowest point, the scale of :mod:`warpsim.energy`): with lossy
+  contacts this is the energy figure;
+- **invariants** of the whole run: energy drift (:mod:`warpsim.energy`; none with lossy
+  contacts, whose energy falls by design), spheres that
   escaped (left the bounds of the obstacles and of the starting positions: in a closed room,
   went through a wall), spheres inside an obstacle (deeper than the run's rounding), spheres
   stopped by the bounce cap.
@@ -47,11 +48,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import validation as check
+from .. import validation as check
+from ..energy import energy_scale, lowest_potential, region_bounds, relative_change
+from ..events import ContactEvents
+from ..scene import Scene
+from ..swarm import Swarm
+from ..trajectory import Trajectory
+from ..vocabulary import ContactKind
 from .reference import ReferenceRun, simulate
-from .scene import Scene
-from .swarm import Swarm
-from .trajectory import Trajectory
 
 #: The short horizons [s] at which position errors are reported.
 HORIZONS = (0.1, 0.5, 1.0)
@@ -79,15 +83,6 @@ INSIDE_ULPS = 64.0
 
 #: Length of the reference run when the simulator has not been stepped yet [s].
 DEFAULT_HORIZON = 1.0
-
-
-@dataclass
-class SimulatedContacts:
-    """Contacts estimated from a run's frames, per sphere (lists of arrays)."""
-
-    time: list[np.ndarray]
-    position: list[np.ndarray]
-    normal: list[np.ndarray]
 
 
 @dataclass
@@ -194,7 +189,7 @@ def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, see
     Raises:
         ValueError: a bad argument (naming it).
     """
-    from .simulator import Simulator
+    from ..simulator import Simulator
 
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a warpsim.Scene, got {type(scene).__name__}")
@@ -243,7 +238,7 @@ def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, see
                                                   if len(sub) else 0.0)
     ref = simulate(scene, _with_velocity(sub, start), horizon, times)
     figures = measure(position, velocity, times, dt, g, motion, ref, contacts,
-                      lowest=lowest_potential(scene, swarm.position))
+                      lowest=lowest_potential(scene.gravity, scene.boxes, swarm.position))
     return ErrorReport(settings=settings, sample=idx, horizon=horizon,
                        contacts=figures["contacts"], position_error=figures["position_error"],
                        divergence=figures["divergence"], invariants=invariants,
@@ -265,8 +260,8 @@ def measure(position: np.ndarray, velocity: np.ndarray | None, times: np.ndarray
         ref: the reference for the same spheres, sampled at ``times``.
         contacts: contacts per sphere compared.
         lowest: the lowest potential energy per unit mass in the scene [J/kg] (see
-            :func:`lowest_potential`), the zero of the energy scale; None: the lowest over the
-            frames.
+            :func:`warpsim.energy.lowest_potential`), the zero of the energy scale; None: the
+            lowest over the frames.
 
     Returns:
         ``{"contacts", "position_error", "divergence", "energy"}`` (plain numbers); ``energy``
@@ -306,7 +301,7 @@ def measure(position: np.ndarray, velocity: np.ndarray | None, times: np.ndarray
     e_start = 0.5 * np.einsum("ki,ki->k", ref.velocity[0], ref.velocity[0]) - ref.position[0] @ g
     if lowest is None:
         lowest = float(np.min(-(ref.position[:, keep] @ g))) if keep.any() else 0.0
-    rel = (np.abs(e_run - e_ref) / np.maximum(e_start - lowest, 1e-12))[keep]
+    rel = (np.abs(e_run - e_ref) / energy_scale(e_start, 1.0, lowest))[keep]
     energy = {"time_s": float(times[-1]), **_stats(rel, "relative")}
     return {"contacts": contact_figs, "position_error": pos_err, "divergence": divergence,
             "energy": energy}
@@ -357,12 +352,17 @@ def velocities_from_positions(position: np.ndarray, dt: float, gravity, motion: 
 
 
 def contacts_from_frames(position, velocity, dt: float, gravity, motion: str,
-                         threshold: float | None = None) -> SimulatedContacts:
+                         threshold: float | None = None) -> ContactEvents:
     """Contacts of each sphere read from its frames (see the module's docstring).
 
     Args:
         position, velocity: (T, K, 3) [m], [m/s], frame ``j`` at time ``j dt``.
         threshold: velocity change [m/s] that marks a contact (default from the constants).
+
+    Returns:
+        The contacts as a table (``sphere`` the column ``k`` of the arrays, by sphere then
+        time; ``box`` -1 and ``normal_speed`` NaN: the frames do not tell them), every one a
+        bounce.
     """
     g = np.asarray(gravity, dtype=np.float64)
     thr = _dv_threshold(dt, g) if threshold is None else threshold
@@ -371,7 +371,9 @@ def contacts_from_frames(position, velocity, dt: float, gravity, motion: str,
     pre = v0 + g * dt  # linear: the step velocity of the frame; ballistic: the free end velocity
     dv = v1 - pre
     hit = np.linalg.norm(dv, axis=2) > thr  # (T-1, K)
-    times, points, normals = [], [], []
+    empty, none = np.zeros(0), np.zeros(0, np.int64)
+    times, fractions, spheres, frame_of = [empty], [empty], [none], [none]
+    points, normals = [np.zeros((0, 3))], [np.zeros((0, 3))]
     for k in range(position.shape[1]):
         frames = np.flatnonzero(hit[:, k])
         d = -dv[frames, k]  # pre - post (linear) / u0 + g dt - u1 (ballistic)
@@ -388,21 +390,30 @@ def contacts_from_frames(position, velocity, dt: float, gravity, motion: str,
         times.append(frames * dt + tau)
         points.append(point)
         normals.append(-d / np.sqrt(size2)[:, None])
-    return SimulatedContacts(time=times, position=points, normal=normals)
+        spheres.append(np.full(len(frames), k, dtype=np.int64))
+        frame_of.append(frames + 1)
+        fractions.append(tau / dt)
+    count = sum(len(t) for t in times)
+    return ContactEvents(time=np.concatenate(times), sphere=np.concatenate(spheres),
+                         box=np.full(count, -1, dtype=np.int32),
+                         position=np.concatenate(points), normal=np.concatenate(normals),
+                         normal_speed=np.full(count, np.nan),
+                         kind=np.full(count, ContactKind.BOUNCE, dtype=np.int8),
+                         frame=np.concatenate(frame_of), fraction=np.concatenate(fractions))
 
 
-def match_contacts(found: SimulatedContacts, ref: ReferenceRun, spheres, k: int,
+def match_contacts(found: ContactEvents, ref: ReferenceRun, spheres, k: int,
                    threshold: float, frame: float) -> dict:
     """The first ``k`` contacts of each sphere matched in order with the reference's bounces
     that change the velocity by more than ``threshold`` [m/s] (``2 x`` normal speed);
     ``frame`` is the run's time step [s] (a contact in the last two frames may be unmatched)."""
     dts, dxs, mismatched, spheres_with = [], [], 0, 0
-    for k_sim, i in enumerate(spheres):
-        ev = ref.events[i].bounces()
+    for i in spheres:
+        ev = ref.events.of_sphere(i).bounces()
         big = 2.0 * ev.normal_speed > threshold
         rt, rp, rn = ev.time[big][:k], ev.position[big][:k], ev.normal[big][:k]
-        st, sp, sn = (found.time[k_sim][:k], found.position[k_sim][:k],
-                      found.normal[k_sim][:k])
+        mine = found.of_sphere(i)
+        st, sp, sn = mine.time[:k], mine.position[:k], mine.normal[:k]
         m = min(len(rt), len(st))
         if len(rt) or len(st):
             spheres_with += 1
@@ -433,10 +444,7 @@ def match_contacts(found: SimulatedContacts, ref: ReferenceRun, spheres, k: int,
 def run_invariants(sim, scene: Scene, swarm: Swarm) -> dict:
     """Energy drift, escaped, inside and capped counts of a simulator's whole swarm now."""
     s = sim.state()
-    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
-    e = np.asarray(sim.mechanical_energy(s), dtype=np.float64)
-    scale = energy_scale(scene, swarm, e0, np.asarray(sim.energy_origin, dtype=np.float64))
-    drift = np.abs(e - e0) / scale
+    drift = np.abs(relative_change(sim, swarm.position, s))
     stats = sim.stats
     pos = s.position.astype(np.float64)
     lossy = scene.energy_retention < 1.0  # energy is lost by design: no drift to speak of
@@ -458,44 +466,11 @@ def trajectory_invariants(traj: Trajectory, scene: Scene) -> dict:
             "capped_spheres": None, "capped_sphere_frames": None}
 
 
-def lowest_potential(scene: Scene, start: np.ndarray, origin=(0.0, 0.0, 0.0)) -> float:
-    """The lowest potential energy per unit mass ``-g . (x - origin)`` [J/kg] over the corners
-    of the scene's region (obstacles and ``start`` positions)."""
-    g = np.asarray(scene.gravity, dtype=np.float64)
-    low, high = scene_bounds(scene, start)
-    start = np.asarray(start, dtype=np.float64)
-    if len(start):
-        low, high = np.minimum(low, start.min(axis=0)), np.maximum(high, start.max(axis=0))
-    corners = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1])
-                        for z in (low[2], high[2])])
-    return float((-(corners - np.asarray(origin, dtype=np.float64)) @ g).min())
-
-
-def energy_scale(scene: Scene, swarm: Swarm, e0: np.ndarray, origin: np.ndarray) -> np.ndarray:
-    """Each sphere's energy above the scene's lowest point [J] (its largest possible kinetic
-    energy), the scale of "energy drift"; at least 1e-12 J."""
-    m = np.asarray(swarm.mass, dtype=np.float64)
-    return np.maximum(e0 - m * lowest_potential(scene, swarm.position, origin), 1e-12)
-
-
-def scene_bounds(scene: Scene, position: np.ndarray):
-    """World axis-aligned bounds [m] of the obstacles (of the spheres when there are none)."""
-    boxes = scene.boxes
-    if len(boxes):
-        ext = boxes.world_extent()
-        return (boxes.center - ext).min(axis=0), (boxes.center + ext).max(axis=0)
-    p = np.asarray(position, dtype=np.float64)
-    return p.min(axis=0), p.max(axis=0)
-
-
 def escaped(scene: Scene, position: np.ndarray, start: np.ndarray) -> int:
     """Spheres whose centre [m] is outside the scene's region: the world bounds of the
     obstacles and of the spheres' ``start`` positions together (for a closed room: spheres
     that went through a wall; in an open scene: that left it)."""
-    low, high = scene_bounds(scene, start)
-    start = np.asarray(start, dtype=np.float64)
-    if len(start):
-        low, high = np.minimum(low, start.min(axis=0)), np.maximum(high, start.max(axis=0))
+    low, high = region_bounds(scene.boxes, start)
     out = np.any((position < low) | (position > high), axis=1)
     return int(np.count_nonzero(out))
 
@@ -505,16 +480,15 @@ def inside(scene: Scene, position: np.ndarray, radius, precision: str) -> int:
     if not len(scene.boxes):
         return 0
     eps = np.finfo(np.float32 if precision == "float32" else np.float64).eps
-    low, high = scene_bounds(scene, position)
+    low, high = region_bounds(scene.boxes, np.zeros((0, 3)))  # the obstacles' bounds
     scale = max(1.0, float(np.abs(np.concatenate([low, high])).max()))
     depth = scene.boxes.signed_distance(position).min(axis=1) - np.asarray(radius)
     return int(np.count_nonzero(depth < -INSIDE_ULPS * eps * scale))
 
 
 def reference_figures(ref: ReferenceRun) -> dict:
-    counts = np.array([len(e.bounces()) for e in ref.events])
-    return {"spheres": len(ref.events), "incomplete": int(ref.incomplete.sum()),
-            "bounces": int(counts.sum()), "steps": int(ref.steps.sum())}
+    return {"spheres": len(ref.incomplete), "incomplete": int(ref.incomplete.sum()),
+            "bounces": len(ref.events.bounces()), "steps": int(ref.steps.sum())}
 
 
 # -- helpers -----------------------------------------------------------------------------------
@@ -522,7 +496,7 @@ def reference_figures(ref: ReferenceRun) -> dict:
 
 def _like(sim, scene: Scene, sub: Swarm):
     """A simulator for ``sub`` with ``sim``'s settings."""
-    from .simulator import Simulator
+    from ..simulator import Simulator
 
     kwargs = dict(dt=sim.dt, max_bounces=sim.max_bounces, device=sim.device,
                   precision=sim.precision, broad_phase=sim.broad_phase)
