@@ -67,13 +67,3 @@ def shaped_half_extents(rng, kind: str, low: float, high: float) -> np.ndarray:
     elif kind == "cube":
         h[:] = h[0]
     return h
-
-
-
-def with_velocity(swarm, velocity):
-    """``swarm`` with another velocity [m/s], (N, 3); everything else as it was."""
-    import warpsim as ws
-
-    return ws.Swarm(position=swarm.position, velocity=velocity, radius=swarm.radius,
-                    mass=swarm.mass, angular_momentum=swarm.angular_momentum,
-                    orientation=swarm.orientation)

@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 import pytest
-from helpers import closed_room, with_velocity
+from helpers import closed_room
 
 import warpsim as ws
 from warpsim.analysis import accuracy, error_report, reference

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from helpers import closed_room, with_velocity
+from helpers import closed_room
 
 import warpsim as ws
 from warpsim.analysis import error_report, reference
