@@ -260,7 +260,7 @@ def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False
                       velocity=stacked("velocity"), angular_velocity=stacked("angular_velocity"),
                       events=ContactEvents.concatenate(events) if events else None,
                       sphere_ids=first.sphere_ids)
-    energy, drift, bounces, capped = (np.array(column) for column in zip(*samples))
+    energy, drift, bounces, capped = (np.array(column) for column in zip(*samples, strict=True))
     scalars = FrameScalars(frame=traj.frame, energy=energy, energy_drift=drift,
                            bounces=np.diff(bounces, prepend=bounces[0]),
                            capped=np.diff(capped, prepend=capped[0]))

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import warpsim as ws
-from warpsim.apps import cli
 from warpsim import ContactEvents, ContactKind
+from warpsim.apps import cli
 from warpsim.export import read_usd, write_usd
 
 rr = pytest.importorskip("rerun")
@@ -80,7 +80,7 @@ def test_sampled_run_is_the_plain_run_and_its_counters(run):
     # contacts since the previous record, from the events table, are the counter's increments
     edges = np.r_[traj.frame[0], traj.frame[1:]]
     per_interval = [int(np.count_nonzero((traj.events.frame > a) & (traj.events.frame <= b)))
-                    for a, b in zip(np.r_[edges[0], edges[:-1]], edges)]
+                    for a, b in zip(np.r_[edges[0], edges[:-1]], edges, strict=True)]
     np.testing.assert_array_equal(scalars.bounces, per_interval)
     assert scalars.bounces.sum() == sim.stats.bounces == len(traj.events)
     assert scalars.capped.sum() == sim.stats.capped
