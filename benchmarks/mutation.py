@@ -9,7 +9,7 @@ mutmut 2 (configured under ``[tool.mutmut]`` in ``pyproject.toml``) edits one so
 place per mutant (a flipped comparison, another constant, a swapped operator, ...), runs that
 file's fast test subset (``SUBSETS``), stops at its first failure and puts the file back. A
 mutant is *killed* when a test fails, *survives* when all pass. The script runs mutmut under
-``nice`` on one process, then prints a table per file and writes ``bench-results/mutation.json``;
+``nice`` on one process, then prints a table per file and writes ``benchmarks/results/mutation.json``;
 the surviving mutants are listed with their diffs (``mutmut show ID``) so that each gets a test or
 a note in BENCHMARKS.md saying why it is equivalent. Do not read ``.mutmut-cache`` while a
 run is going: mutmut's own lookups then fail ("Attribute Mutant.line is required").
