@@ -47,11 +47,15 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from pxr import Sdf, Tf, Usd, UsdGeom, Vt
+from pxr import Sdf, Tf, Vt
 
 from ..trajectory import Trajectory
 from .files import atomic_output
-from .usd_read import instancer_state, recorded_frames, sphere_radii
+from .usd_read import (  # the readers live with read_usd, which reads sharded roots too
+    SHARD_PREFIX,
+    read_sharded_ids,
+    read_sharded_usd,
+)
 from .usd_write import (
     DEGREES_PER_RADIAN,
     PROTOTYPE,
@@ -59,13 +63,11 @@ from .usd_write import (
     WORLD,
     export_layer,
     half_orientations,
-    pxr_message,
     write_usd,
 )
 
 SPHERE_SHAPES = f"{WORLD}/SphereShapes"
 SPHERE_SHAPE = f"{SPHERE_SHAPES}/CheckerBall"
-SHARD_PREFIX = "Shard_"
 SHARD_WIDTH = 5  # digits of shard numbers in prim and file names (more when needed)
 MANIFEST = "warpsim:shard"
 ROOT_MANIFEST = "warpsim:shards"
@@ -303,83 +305,6 @@ def root_manifest(path) -> dict | None:
         return None
     return {k: list(v) if isinstance(v, (Vt.StringArray, Vt.Int64Array, Vt.DoubleArray))
             else v for k, v in value.items()}
-
-
-def shard_instancers(stage: Usd.Stage) -> list[UsdGeom.PointInstancer]:
-    """The shard instancers under ``/World/Spheres`` of a composed root stage, in shard order."""
-    root = stage.GetPrimAtPath(SPHERES)
-    if not root:
-        return []
-    prims = sorted((p for p in root.GetChildren()
-                    if p.GetName().startswith(SHARD_PREFIX) and p.IsA(UsdGeom.PointInstancer)),
-                   key=lambda p: p.GetName())
-    return [UsdGeom.PointInstancer(p) for p in prims]
-
-
-def read_sharded_usd(path) -> Trajectory:
-    """Read a root stage and all its shards back as one trajectory, spheres in swarm order.
-
-    The stage is opened and composed (``Usd.Stage.Open``); every shard instancer is read as
-    :func:`warpsim.export.read_usd` reads ``write_usd``'s one instancer (same dtypes and exact
-    values), and the shards' spheres are put in the order of their ``ids``.
-
-    Returns:
-        A :class:`warpsim.Trajectory`: ``frame`` (F,), ``position`` (F, N, 3) float32 [m],
-        ``orientation`` (F, N, 4) float32, ``radius`` (N,) float64 [m], ``velocity`` and
-        ``angular_velocity`` when stored; N is the spheres of all shards.
-
-    Raises:
-        FileNotFoundError: no file at ``path``. ValueError: no shard instancer, the shards do
-        not share their recorded frames, or two shards hold the same sphere.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no USD file at {str(path)!r}")
-    try:
-        stage = Usd.Stage.Open(str(path), load=Usd.Stage.LoadAll)
-    except Tf.ErrorException as exc:
-        raise ValueError(f"USD could not read {str(path)!r}: {pxr_message(exc)}") from None
-    instancers = shard_instancers(stage)
-    if not instancers:
-        raise ValueError(f"{str(path)!r} has no shard instancers under {SPHERES}")
-    frames = recorded_frames(instancers[0])
-    parts = {key: [] for key in ("position", "orientation", "velocity", "angular_velocity")}
-    ids, radii = [], []
-    for inst in instancers:
-        if not np.array_equal(recorded_frames(inst), frames):
-            raise ValueError(f"{str(path)!r}: {inst.GetPath()} has other recorded frames than "
-                             f"{instancers[0].GetPath()}")
-        states = [instancer_state(inst, int(f)) for f in frames]
-        for key, values in parts.items():
-            values.append(np.stack([s[key] for s in states]) if key in states[0] else None)
-        ids.append(np.asarray(inst.GetIdsAttr().Get(), dtype=np.int64))
-        radii.append(sphere_radii(inst))
-    all_ids = np.concatenate(ids)
-    order = np.argsort(all_ids, kind="stable")
-    if np.unique(all_ids).size != all_ids.size:
-        raise ValueError(f"{str(path)!r}: two shards hold the same sphere id")
-
-    def joined(key):
-        values = parts[key]
-        if any(v is None for v in values):
-            return None
-        return np.concatenate(values, axis=1)[:, order]
-
-    world = stage.GetPrimAtPath(WORLD)
-    dt_attr = world.GetAttribute("warpsim:dt") if world else None
-    dt = float(dt_attr.Get()) if dt_attr else 1.0 / stage.GetTimeCodesPerSecond()
-    return Trajectory(frame=frames, dt=dt, position=joined("position"),
-                      orientation=joined("orientation"),
-                      radius=np.concatenate(radii)[order], velocity=joined("velocity"),
-                      angular_velocity=joined("angular_velocity"))
-
-
-def read_sharded_ids(path) -> np.ndarray:
-    """The swarm indices of the spheres of a root stage, in the order :func:`read_sharded_usd`
-    returns them (sorted)."""
-    stage = Usd.Stage.Open(str(path))
-    ids = [np.asarray(i.GetIdsAttr().Get(), dtype=np.int64) for i in shard_instancers(stage)]
-    return np.sort(np.concatenate(ids)) if ids else np.zeros(0, dtype=np.int64)
 
 
 __all__ = ["read_sharded_ids", "read_sharded_usd", "root_manifest", "shard_folder",

@@ -7,6 +7,7 @@ and refuses, in one line naming the file, what is not a warpsim file.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,9 @@ from ..obstacles import RoundedBoxes
 from ..trajectory import Trajectory
 from .origins import ORIGIN_OP
 from .usd_write import DEGREES_PER_RADIAN, OBSTACLES, SPHERES, WORLD, pxr_message
+
+SHARD_PREFIX = "Shard_"
+"""Name prefix of the shard instancers under ``/World/Spheres`` of a sharded run's root."""
 
 
 def _open_layer(path) -> Sdf.Layer:
@@ -147,6 +151,84 @@ def _trajectory(stage: Usd.Stage, instancer, frames: np.ndarray) -> Trajectory:
                       angular_velocity=stacked("angular_velocity", 3))
 
 
+def shard_instancers(stage: Usd.Stage) -> list[UsdGeom.PointInstancer]:
+    """The shard instancers under ``/World/Spheres`` of a composed root stage, in shard order."""
+    root = stage.GetPrimAtPath(SPHERES)
+    if not root:
+        return []
+    prims = sorted((p for p in root.GetChildren()
+                    if p.GetName().startswith(SHARD_PREFIX) and p.IsA(UsdGeom.PointInstancer)),
+                   key=lambda p: p.GetName())
+    return [UsdGeom.PointInstancer(p) for p in prims]
+
+
+def read_sharded_usd(path) -> Trajectory:
+    """Read a root stage and all its shards back as one trajectory, spheres in swarm order.
+
+    The stage is opened and composed (``Usd.Stage.Open``); every shard instancer is read as
+    :func:`warpsim.export.read_usd` reads ``write_usd``'s one instancer (same dtypes and exact
+    values), and the shards' spheres are put in the order of their ``ids``.
+
+    Returns:
+        A :class:`warpsim.Trajectory`: ``frame`` (F,), ``position`` (F, N, 3) float32 [m],
+        ``orientation`` (F, N, 4) float32, ``radius`` (N,) float64 [m], ``velocity`` and
+        ``angular_velocity`` when stored; N is the spheres of all shards.
+
+    Raises:
+        FileNotFoundError: no file at ``path``. ValueError: no shard instancer, the shards do
+        not share their recorded frames, or two shards hold the same sphere.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no USD file at {str(path)!r}")
+    try:
+        stage = Usd.Stage.Open(str(path), load=Usd.Stage.LoadAll)
+    except Tf.ErrorException as exc:
+        raise ValueError(f"USD could not read {str(path)!r}: {pxr_message(exc)}") from None
+    instancers = shard_instancers(stage)
+    if not instancers:
+        raise ValueError(f"{str(path)!r} has no shard instancers under {SPHERES}")
+    frames = recorded_frames(instancers[0])
+    parts = {key: [] for key in ("position", "orientation", "velocity", "angular_velocity")}
+    ids, radii = [], []
+    for inst in instancers:
+        if not np.array_equal(recorded_frames(inst), frames):
+            raise ValueError(f"{str(path)!r}: {inst.GetPath()} has other recorded frames than "
+                             f"{instancers[0].GetPath()}")
+        states = [instancer_state(inst, int(f)) for f in frames]
+        for key, values in parts.items():
+            values.append(np.stack([s[key] for s in states]) if key in states[0] else None)
+        ids.append(np.asarray(inst.GetIdsAttr().Get(), dtype=np.int64))
+        radii.append(sphere_radii(inst))
+    all_ids = np.concatenate(ids)
+    order = np.argsort(all_ids, kind="stable")
+    if np.unique(all_ids).size != all_ids.size:
+        raise ValueError(f"{str(path)!r}: two shards hold the same sphere id")
+
+    def joined(key):
+        values = parts[key]
+        if any(v is None for v in values):
+            return None
+        return np.concatenate(values, axis=1)[:, order]
+
+    world = stage.GetPrimAtPath(WORLD)
+    dt_attr = world.GetAttribute("warpsim:dt") if world else None
+    dt = float(dt_attr.Get()) if dt_attr else 1.0 / stage.GetTimeCodesPerSecond()
+    return Trajectory(frame=frames, dt=dt, position=joined("position"),
+                      orientation=joined("orientation"),
+                      radius=np.concatenate(radii)[order], velocity=joined("velocity"),
+                      angular_velocity=joined("angular_velocity"))
+
+
+def read_sharded_ids(path) -> np.ndarray:
+    """The swarm indices of the spheres of a root stage, in the order :func:`read_sharded_usd`
+    returns them (sorted)."""
+    stage = Usd.Stage.Open(str(path))
+    ids = [np.asarray(i.GetIdsAttr().Get(), dtype=np.int64) for i in shard_instancers(stage)]
+    return np.sort(np.concatenate(ids)) if ids else np.zeros(0, dtype=np.int64)
+
+
+
 def read_usd(path) -> Trajectory:
     """Read back the trajectory of a file written by :func:`write_usd`.
 
@@ -158,16 +240,27 @@ def read_usd(path) -> Trajectory:
     when the file has them, else None. With a ``spheres`` subset, N is the subset in the order
     written (its swarm indices are the instancer's ``ids``).
 
+    The root stage of a sharded run (``warpsim run --shards``/``--dask``) is read whole, its
+    spheres in swarm order (:func:`read_sharded_usd`).
+
     Raises:
         FileNotFoundError: no file at ``path``.
         ValueError: not a USD file, or not one written by warpsim.
     """
     stage = open_stage(path, spheres_only=True)
+    if _is_sharded_root(stage):
+        return read_sharded_usd(path)
     instancer = sphere_instancer(stage, path)
     frames = recorded_frames(instancer)
     if frames.size == 0:
         raise ValueError(f"{str(path)!r} has no time-sampled sphere positions")
     return _trajectory(stage, instancer, frames)
+
+
+def _is_sharded_root(stage: Usd.Stage) -> bool:
+    """Whether ``/World/Spheres`` is a sharded run's Scope of shard instancers."""
+    prim = stage.GetPrimAtPath(SPHERES)
+    return bool(prim) and not prim.IsA(UsdGeom.PointInstancer) and bool(shard_instancers(stage))
 
 
 def frame_label(frames: np.ndarray) -> str:
@@ -219,6 +312,16 @@ def read_usd_frame(path, frame: int) -> Trajectory:
             warpsim file.
     """
     stage = open_stage(path, spheres_only=True)
+    if _is_sharded_root(stage):  # every shard's frames, then the one asked for
+        whole = read_sharded_usd(path)
+        k = int(np.searchsorted(whole.frame, resolve_frame(whole.frame, frame, path)))
+
+        def one(values):
+            return None if values is None else values[k:k + 1]
+
+        return replace(whole, frame=whole.frame[k:k + 1], position=one(whole.position),
+                       orientation=one(whole.orientation), velocity=one(whole.velocity),
+                       angular_velocity=one(whole.angular_velocity))
     instancer = sphere_instancer(stage, path)
     chosen = resolve_frame(recorded_frames(instancer), frame, path)
     return _trajectory(stage, instancer, np.array([chosen], dtype=np.int64))

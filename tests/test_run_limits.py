@@ -341,6 +341,19 @@ def test_plain_and_sharded_runs_simulate_the_same_spheres(tmp_path, capsys, n, s
     both = distributed.read(sharded)
     np.testing.assert_array_equal(both.position, one.position)
     np.testing.assert_array_equal(both.orientation, one.orientation)
+    # the readers a user reaches for take the sharded root as they take a single file
+    whole = ws.export.read_usd(sharded)
+    np.testing.assert_array_equal(whole.frame, one.frame)
+    np.testing.assert_array_equal(whole.position, one.position)
+    np.testing.assert_array_equal(whole.radius, one.radius)
+    for k in (0, -1, int(one.frame[2])):
+        frame = ws.export.read_usd_frame(sharded, k)
+        i = k if k < 0 else int(np.searchsorted(one.frame, k))
+        assert frame.frame.tolist() == [int(one.frame[i])]
+        np.testing.assert_array_equal(frame.position[0], one.position[i])
+    code, out, err = cli(capsys, "preview", sharded, "-o", tmp_path / "s.png", "--size", "64x48")
+    assert code == 0, err
+    assert (tmp_path / "s.png").stat().st_size > 0
 
 
 def test_too_many_shards_says_why_and_stale_layers_go(tmp_path, capsys):
