@@ -196,14 +196,15 @@ def write_shard_layer(path, trajectory: Trajectory, ids, index: int, count: int,
             attrs["velocities"] = _attribute(inst, "velocities", T.Vector3fArray)
             attrs["angularVelocities"] = _attribute(inst, "angularVelocities", T.Vector3fArray)
         paths = {name: attr.path for name, attr in attrs.items()}
-        previous = None
+        previous = previous_q = None
         for row, frame in enumerate(frames.tolist()):
             time = float(frame)
             layer.SetTimeSample(paths["positions"], time, Vt.Vec3fArray.FromNumpy(position[row]))
             # Vt quaternion arrays lay out each element as (i, j, k, real) = (x, y, z, w)
             layer.SetTimeSample(paths["orientationsf"], time,
                                 Vt.QuatfArray.FromNumpy(orientation[row]))
-            previous = half_orientations(trajectory.orientation[row], previous)
+            q = trajectory.orientation[row]
+            previous, previous_q = half_orientations(q, previous, previous_q), q
             layer.SetTimeSample(paths["orientations"], time, Vt.QuathArray.FromNumpy(previous))
             if velocities:
                 layer.SetTimeSample(paths["velocities"], time,

@@ -244,7 +244,7 @@ def _shapes(boxes: RoundedBoxes) -> tuple[np.ndarray, np.ndarray]:
     return rank[inverse.reshape(-1)], key[first[order]]
 
 
-def half_orientations(q, previous=None) -> np.ndarray:
+def half_orientations(q, previous=None, previous_q=None) -> np.ndarray:
     """Quaternions (x, y, z, w) in half precision, as good as half precision allows.
 
     The quaternions are normalised in float64, then each component is taken from the two half
@@ -258,10 +258,21 @@ def half_orientations(q, previous=None) -> np.ndarray:
     Args:
         q: quaternions, shape (N, 4), any non-zero length.
         previous: half quaternions (N, 4) of the previous frame, or None.
+        previous_q: the quaternions (N, 4) that ``previous`` was made from, or None. A row of
+            ``q`` equal to its row there keeps its ``previous`` value unchanged: the choice is
+            per row and ``previous`` already lies in its own hemisphere, so this is exactly what
+            the whole computation gives, and a frame where nothing turned costs a comparison.
 
     Returns:
         (N, 4) float16.
     """
+    if previous is not None and previous_q is not None:
+        q = np.asarray(q).reshape(-1, 4)
+        moved = np.any(q != np.asarray(previous_q).reshape(-1, 4), axis=1)
+        out = np.array(previous, dtype=np.float16).reshape(-1, 4)
+        if moved.any():
+            out[moved] = half_orientations(q[moved], out[moved])
+        return out
     q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
     out = np.empty(q.shape, dtype=np.float16)
     combos = (np.arange(16)[:, None] >> np.arange(4)[None, :]) & 1  # (16, 4): 0 below, 1 above
@@ -430,7 +441,7 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
 
     # Vt quaternion arrays lay out each element as (i, j, k, real): warpsim's (x, y, z, w) order,
     # so the numpy rows go in unchanged (the Gf constructors, by contrast, take the real first).
-    previous = None
+    previous = previous_q = None
     with Sdf.ChangeBlock():
         for row, origin in zip(rows, origins, strict=True):
             time = float(frames[row])
@@ -442,7 +453,7 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
             # Each precision rounded from the source values (no double rounding via float32).
             layer.SetTimeSample(paths["orientationsf"], time, Vt.QuatfArray.FromNumpy(
                 np.ascontiguousarray(q, dtype=np.float32).reshape(n, 4)))
-            previous = half_orientations(q, previous)
+            previous, previous_q = half_orientations(q, previous, previous_q), q
             layer.SetTimeSample(paths["orientations"], time, Vt.QuathArray.FromNumpy(previous))
             if velocity is not None:
                 layer.SetTimeSample(paths["velocities"], time, vec3(velocity[row][idx]))

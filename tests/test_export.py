@@ -165,6 +165,26 @@ def test_half_orientations_is_never_worse_than_nearest_rounding():
     np.testing.assert_array_equal(identity, [[0, 0, 0, 1]])
 
 
+@pytest.mark.parametrize("still", [0.0, 0.5, 1.0])
+def test_half_orientations_of_unchanged_rows_are_the_whole_computation(still):
+    """Reusing the previous frame's half values for the rows that did not turn gives exactly
+    what the whole computation gives, frame after frame, signs included."""
+    rng = np.random.default_rng(11)
+    n, frames = 3000, 6
+    q = np.empty((frames, n, 4))
+    q[0] = rng.normal(size=(n, 4))
+    for f in range(1, frames):
+        turned = rng.random(n) >= still
+        q[f] = q[f - 1]
+        q[f, turned] = rng.normal(size=(int(turned.sum()), 4))
+        q[f, turned & (rng.random(n) < 0.5)] *= -1.0  # the same rotation, the other sign too
+    whole = incremental = incremental_q = None
+    for f in range(frames):
+        whole = half_orientations(q[f], whole)
+        incremental, incremental_q = half_orientations(q[f], incremental, incremental_q), q[f]
+        np.testing.assert_array_equal(incremental, whole)
+
+
 @pytest.mark.parametrize("attribute", ["orientationsf", "orientations"])
 def test_usd_reads_rotations_in_warpsim_convention(tmp_path, attribute):
     """USD's own instance transforms equal warpsim's (x, y, z, w) rotations and positions.
