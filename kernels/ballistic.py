@@ -54,18 +54,13 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
     """
     p = precision(features.precision)
     scalar, vec3 = p.scalar, p.vec3
-    structs = model_structs(p)
-    Boxes, BroadPhase = structs.Boxes, structs.BroadPhase
-    Physics, EventBuffer = structs.Physics, structs.EventBuffer
+    Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
     nearest_hit_arc = model_nearest_hit_arc(p, features.broad_phase)
     arc_contact_centre = nearest_arc_funcs(p).arc_contact_centre
     arc_point = arc_funcs(p).arc_point
-    contact = contact_funcs(p, features.spin, features.lossy, features.events)
-    contact_spin, write_event = contact.contact_spin, contact.write_event
-    retention_keep, bounce_loss = contact.retention_keep, contact.bounce_loss
+    on_contact = contact_funcs(p, features.spin, features.lossy, features.events)
     ZERO = scalar(0.0)
     HALF = scalar(0.5)
-    ONE = scalar(1.0)
     TWO = scalar(2.0)
     RESTING = scalar(RESTING_SPEED)
     COPLANAR = scalar(1.0 - COPLANAR_REL)
@@ -125,17 +120,17 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                                              boxes.extent[box])
                 u = v + s * g_eff
                 rest = wp.max(rest - s, ZERO)
-                L = contact_spin(L, u, n, r, m, physics)
+                L = on_contact.spin(L, u, n, r, m, physics)
                 un = wp.dot(u, n)
                 gn = wp.dot(g, n)
-                keep = retention_keep(physics)
+                keep = on_contact.keep(physics)
                 # a support: gravity presses, and the normal speed is below RESTING_SPEED or the
                 # hop would last less than dt / max_bounces (2 keep |un| / |gn|)
                 resting = gn < -TANGENT_REL * wp.length(g) and (
                     -un <= wp.max(RESTING, -gn * dt * HALF_HOP / (scalar(wp.max(max_bounces, 1))
                                                                 * keep)))
-                write_event(events, frame, sphere, box, int(resting), contact, n,
-                            (dt - rest) / dt, -un)
+                on_contact.event(events, frame, sphere, box, int(resting), contact, n,
+                                 (dt - rest) / dt, -un)
                 if resting:
                     supported = 1
                     u_sq = wp.dot(u, u)
@@ -165,7 +160,7 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                 else:
                     v = u - TWO * un * n
                     if wp.static(features.lossy):
-                        energy = bounce_loss(energy, m, contact, physics)
+                        energy = on_contact.loss(energy, m, contact, physics)
                         v = v * keep
                     if supports > 0:
                         speed = wp.length(v)

@@ -52,15 +52,11 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
     """
     p = precision(features.precision)
     scalar, vec3 = p.scalar, p.vec3
-    structs = model_structs(p)
-    Boxes, BroadPhase = structs.Boxes, structs.BroadPhase
-    Physics, EventBuffer = structs.Physics, structs.EventBuffer
+    Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
     lossy = features.lossy
     nearest_hit = model_nearest_hit(p, features.broad_phase)
     contact_centre = nearest_funcs(p).contact_centre
-    contact = contact_funcs(p, features.spin, lossy, features.events)
-    contact_spin, write_event = contact.contact_spin, contact.write_event
-    retention_keep, bounce_loss = contact.retention_keep, contact.bounce_loss
+    on_contact = contact_funcs(p, features.spin, lossy, features.events)
     potential = dynamics_funcs(p).potential
     ZERO = scalar(0.0)
     ONE = scalar(1.0)
@@ -138,7 +134,7 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
             else:
                 bounces += 1
                 contact = contact_centre(a, t, d, n, boxes.radius[box] + r, boxes.extent[box])
-                L = contact_spin(L, v, n, r, m, physics)
+                L = on_contact.spin(L, v, n, r, m, physics)
                 vn = wp.dot(v, n)
                 dn = wp.dot(d, n)
                 resting = -vn <= REST * wp.max(-wp.dot(g, n), ZERO) * dt
@@ -147,7 +143,8 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
                     gap = t * -dn
                     scale = wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))
                     resting = resting and gap <= GAP_ULPS * (scale + wp.length(d))
-                write_event(events, frame, sphere, box, int(resting), contact, n, travelled, -vn)
+                on_contact.event(events, frame, sphere, box, int(resting), contact, n, travelled,
+                                 -vn)
                 if resting:
                     supported = 1
                     v = v - vn * n
@@ -156,8 +153,8 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
                     v = v - TWO * vn * n
                     d = (ONE - t) * (d - TWO * dn * n)
                     if wp.static(lossy):
-                        energy = bounce_loss(energy, m, contact, physics)
-                        keep = retention_keep(physics)
+                        energy = on_contact.loss(energy, m, contact, physics)
+                        keep = on_contact.keep(physics)
                         v = v * keep
                         d = d * keep
                 d = clip_rise(contact, d, v, m, g, physics.origin, energy)

@@ -70,6 +70,31 @@ def path_struct(p: Precision):
 
 
 @cache
+def path_funcs(p: Precision):
+    """``make_path(a, v, g, tau, r, d, grow) -> Path``: the path from ``a`` [m] along ``v``, ``g``
+    over ``[0, tau]`` whose chord is ``d`` [m] and whose bounds grow by ``grow`` [m] per axis."""
+    scalar, vec3 = p.scalar, p.vec3
+    Path = path_struct(p)
+    HALF = scalar(0.5)
+
+    @wp.func
+    def make_path(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, d: vec3, grow: vec3):
+        q = Path()
+        q.a = a
+        q.v = v
+        q.g = g
+        q.tau = tau
+        q.r = r
+        q.mid = a + HALF * d
+        q.half_d = vec3(HALF * wp.abs(d[0]), HALF * wp.abs(d[1]), HALF * wp.abs(d[2]))
+        q.grow = grow
+        q.end = a + d
+        return q
+
+    return make_path
+
+
+@cache
 def bounds_funcs(p: Precision) -> SimpleNamespace:
     """The path bounds shared by every loop: the reject, the grid fit and the BVH query box.
 
@@ -169,8 +194,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
         raise ValueError(f"broad_phase must be one of {BROAD_PHASES}, got {broad_phase!r}")
     scalar, vec3 = p.scalar, p.vec3
     Path = path_struct(p)
-    structs = model_structs(p)
-    Boxes, BroadPhase = structs.Boxes, structs.BroadPhase
+    Boxes, BroadPhase, _, _ = model_structs(p)
     bounds = bounds_funcs(p)
     apart, grid_fits, bvh_box = bounds.apart, bounds.grid_fits, bounds.bvh_box
     use_grid = broad_phase in ("grid", "grid-bvh")

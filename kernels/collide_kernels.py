@@ -35,8 +35,7 @@ def collide_kernel(features: Features):
     """
     p = precision(features.precision)
     scalar, vec3 = p.scalar, p.vec3
-    structs = model_structs(p)
-    Boxes, BroadPhase, Physics = structs.Boxes, structs.BroadPhase, structs.Physics
+    Boxes, BroadPhase, Physics, _ = model_structs(p)
     ballistic = features.motion == "ballistic"
     nearest_hit = model_nearest_hit(p, features.broad_phase)
     contact_centre = nearest_funcs(p).contact_centre
@@ -130,9 +129,7 @@ def bounce_kernel(features: Features):
     """
     p = precision(features.precision)
     scalar, vec3 = p.scalar, p.vec3
-    structs = model_structs(p)
-    Boxes, BroadPhase = structs.Boxes, structs.BroadPhase
-    Physics, EventBuffer = structs.Physics, structs.EventBuffer
+    Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
     features = features.but(energy_correction=False, events=False)
     if features.motion == "ballistic":
         path = ballistic_funcs(features).ballistic_path

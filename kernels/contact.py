@@ -22,13 +22,12 @@ def contact_funcs(p: Precision, spin: bool, lossy: bool, events: bool) -> Simple
     """Build the contact bookkeeping for one precision and feature set.
 
     Returns:
-        Namespace with ``contact_spin``, ``write_event``, ``retention_keep`` and
-        ``bounce_loss``.
+        Namespace with ``spin`` (:func:`contact_spin`), ``event`` (``write_event``), ``keep``
+        (``retention_keep``) and ``loss`` (``bounce_loss``).
     """
     scalar, vec3 = p.scalar, p.vec3
     with_events = events  # the name is the buffer's inside a func
-    structs = model_structs(p)
-    Physics, EventBuffer = structs.Physics, structs.EventBuffer
+    _, _, Physics, EventBuffer = model_structs(p)
     dyn = dynamics_funcs(p)
     friction_spin, potential = dyn.friction_spin, dyn.potential
     ONE = scalar(1.0)
@@ -77,5 +76,5 @@ def contact_funcs(p: Precision, spin: bool, lossy: bool, events: bool) -> Simple
             out = ep + physics.retention * (energy - ep)
         return out
 
-    return SimpleNamespace(contact_spin=contact_spin, write_event=write_event,
-                           retention_keep=retention_keep, bounce_loss=bounce_loss)
+    return SimpleNamespace(spin=contact_spin, event=write_event, keep=retention_keep,
+                           loss=bounce_loss)

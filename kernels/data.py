@@ -14,7 +14,7 @@ set per precision.
 
 from dataclasses import dataclass, replace
 from functools import cache
-from types import SimpleNamespace
+from typing import NamedTuple
 
 import warp as wp
 
@@ -71,13 +71,18 @@ class Features:
         return replace(self, **changes)
 
 
-@cache
-def model_structs(p: Precision) -> SimpleNamespace:
-    """The device structs for one precision.
+class ModelStructs(NamedTuple):
+    """The struct types of one precision (see :func:`model_structs`)."""
 
-    Returns:
-        Namespace with ``Boxes``, ``BroadPhase``, ``Physics`` and ``EventBuffer``.
-    """
+    Boxes: type
+    BroadPhase: type
+    Physics: type
+    EventBuffer: type
+
+
+@cache
+def model_structs(p: Precision) -> ModelStructs:
+    """The device structs for one precision: ``Boxes, BroadPhase, Physics, EventBuffer``."""
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
 
     @wp.struct
@@ -153,5 +158,4 @@ def model_structs(p: Precision) -> SimpleNamespace:
         value: wp.array2d[scalar]
         """``(fraction of the frame, normal speed before the contact [m/s])``, shape (C, 2)."""
 
-    return SimpleNamespace(Boxes=Boxes, BroadPhase=BroadPhase, Physics=Physics,
-                           EventBuffer=EventBuffer)
+    return ModelStructs(Boxes, BroadPhase, Physics, EventBuffer)

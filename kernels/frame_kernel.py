@@ -64,9 +64,7 @@ def frame_kernel(features: Features):
     """
     p = precision(features.precision)
     scalar, vec3, quat = p.scalar, p.vec3, p.quat
-    structs = model_structs(p)
-    Boxes, BroadPhase = structs.Boxes, structs.BroadPhase
-    Physics, EventBuffer = structs.Physics, structs.EventBuffer
+    Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
     spin, energy_correction = features.spin, features.energy_correction
     motion = features.motion
     if motion == "ballistic":

@@ -18,6 +18,7 @@ from .candidates import (  # noqa: F401 (the constants of the reject and the BVH
     BOUNDS_PAD_REL,
     REJECT_SLACK,
     candidate_funcs,
+    path_funcs,
     path_struct,
 )
 from .data import BROAD_PHASES, model_structs  # noqa: F401 (BROAD_PHASES: named here too)
@@ -41,10 +42,10 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
     """
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     Path = path_struct(p)
+    make_path = path_funcs(p)
     sweep_rounded_box = rounded_box_funcs(p).sweep_rounded_box
     ZERO = scalar(0.0)
     ONE = scalar(1.0)
-    HALF = scalar(0.5)
     SEPARATION = scalar(SEPARATION_ULPS * p.eps)
 
     @wp.func
@@ -77,17 +78,7 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
     def chord_path(a: vec3, d: vec3, r: scalar):
         """The ``Path`` of a sphere of radius ``r`` [m] whose centre moves from ``a`` by ``d``
         [m]: its bounds grow by ``r`` on every axis, ``t`` runs over ``[0, 1]``."""
-        q = Path()
-        q.a = a
-        q.v = d
-        q.g = vec3(ZERO, ZERO, ZERO)
-        q.tau = ONE
-        q.r = r
-        q.mid = a + HALF * d
-        q.half_d = vec3(HALF * wp.abs(d[0]), HALF * wp.abs(d[1]), HALF * wp.abs(d[2]))
-        q.grow = vec3(r, r, r)
-        q.end = a + d
-        return q
+        return make_path(a, d, vec3(ZERO, ZERO, ZERO), ONE, r, d, vec3(r, r, r))
 
     @wp.func
     def sweep_chord(q: Path, center: vec3, rotation: mat33, half_extents: vec3,
@@ -121,8 +112,7 @@ def model_nearest_hit(p: Precision, broad_phase: str):
         index); ``box`` is -1 when nothing is hit (then ``t = 1``, normal 0).
     """
     scalar, vec3 = p.scalar, p.vec3
-    structs = model_structs(p)
-    Boxes, BroadPhase = structs.Boxes, structs.BroadPhase
+    Boxes, BroadPhase, _, _ = model_structs(p)
     funcs = nearest_funcs(p)
     chord_path = funcs.chord_path
     nearest = candidate_funcs(p, funcs.sweep_chord, broad_phase).nearest

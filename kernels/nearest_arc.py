@@ -19,8 +19,8 @@ from types import SimpleNamespace
 import warp as wp
 
 from .arc import arc_funcs
-from .candidates import candidate_funcs, path_struct
-from .data import BROAD_PHASES, model_structs
+from .candidates import candidate_funcs, path_funcs, path_struct
+from .data import model_structs
 from .nearest import model_nearest_hit, nearest_funcs
 from .precision import Precision
 
@@ -35,8 +35,8 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
     """
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     Path = path_struct(p)
-    structs = model_structs(p)
-    Boxes = structs.Boxes
+    make_path = path_funcs(p)
+    Boxes = model_structs(p).Boxes
     arc = arc_funcs(p)
     sweep_rounded_box_arc = arc.sweep_rounded_box_arc
     arc_point = arc.arc_point
@@ -60,17 +60,7 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
         ``g`` [m/s^2] over ``[0, tau]`` [s], of a sphere of radius ``r`` [m]: the chord's
         bounds grown by ``r`` and the per-axis sagitta."""
         d = tau * (v + (HALF * tau) * g)
-        q = Path()
-        q.a = a
-        q.v = v
-        q.g = g
-        q.tau = tau
-        q.r = r
-        q.mid = a + HALF * d
-        q.half_d = vec3(HALF * wp.abs(d[0]), HALF * wp.abs(d[1]), HALF * wp.abs(d[2]))
-        q.grow = sagitta(g, tau) + vec3(r, r, r)
-        q.end = a + d
-        return q
+        return make_path(a, v, g, tau, r, d, sagitta(g, tau) + vec3(r, r, r))
 
     @wp.func
     def sweep_arc(q: Path, center: vec3, rotation: mat33, half_extents: vec3,
@@ -138,20 +128,6 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
                            arc_contact_centre=arc_contact_centre)
 
 
-def uses_bvh(broad_phase) -> bool:
-    """Whether ``broad_phase`` falls back to (or is) the BVH query: ``True``, ``"bvh"`` or
-    ``"grid-bvh"``; ``False``, ``"brute"`` or ``"grid"`` are not.
-
-    Raises:
-        ValueError: anything else.
-    """
-    if broad_phase is True or broad_phase in ("bvh", "grid-bvh"):
-        return True
-    if broad_phase is False or broad_phase in ("brute", "grid"):
-        return False
-    raise ValueError(f"broad_phase for arcs must be one of {BROAD_PHASES}, got {broad_phase!r}")
-
-
 @cache
 def model_nearest_hit_arc(p: Precision, broad_phase: str):
     """The arc's nearest-hit ``@wp.func`` the kernels call.
@@ -169,8 +145,7 @@ def model_nearest_hit_arc(p: Precision, broad_phase: str):
         a + v tau`` (``s = t tau``), bit for bit.
     """
     scalar, vec3 = p.scalar, p.vec3
-    structs = model_structs(p)
-    Boxes, BroadPhase = structs.Boxes, structs.BroadPhase
+    Boxes, BroadPhase, _, _ = model_structs(p)
     funcs = nearest_arc_funcs(p)
     arc_path = funcs.arc_path
     nearest = candidate_funcs(p, funcs.sweep_arc, broad_phase).nearest
