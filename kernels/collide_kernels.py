@@ -87,19 +87,12 @@ def collide_kernel(features: Features):
     @variant_kernel
     def collide_spheres(
         # Model:
-        boxes: Boxes,
-        broad: BroadPhase,
-        physics: Physics,
+        boxes: Boxes, broad: BroadPhase, physics: Physics,
         # In:
-        position_in: wp.array[vec3],
-        velocity_in: wp.array[vec3],
-        radius: wp.array[scalar],
+        position_in: wp.array[vec3], velocity_in: wp.array[vec3], radius: wp.array[scalar],
         # Out:
-        box_out: wp.array[wp.int32],
-        t_out: wp.array[scalar],
-        contact_out: wp.array[vec3],
-        normal_out: wp.array[vec3],
-        new_position_out: wp.array[vec3],
+        box_out: wp.array[wp.int32], t_out: wp.array[scalar], contact_out: wp.array[vec3],
+        normal_out: wp.array[vec3], new_position_out: wp.array[vec3],
         new_velocity_out: wp.array[vec3],
     ):
         i = wp.tid()
@@ -154,22 +147,14 @@ def bounce_kernel(features: Features):
     @variant_kernel
     def bounce_spheres(
         # Model:
-        boxes: Boxes,
-        broad: BroadPhase,
-        physics: Physics,
+        boxes: Boxes, broad: BroadPhase, physics: Physics,
         # In:
-        position_in: wp.array[vec3],
-        velocity_in: wp.array[vec3],
-        radius: wp.array[scalar],
-        mass: wp.array[scalar],
-        angular_momentum_in: wp.array[vec3],
+        position_in: wp.array[vec3], velocity_in: wp.array[vec3], radius: wp.array[scalar],
+        mass: wp.array[scalar], angular_momentum_in: wp.array[vec3],
         # Out:
-        bounces_out: wp.array[wp.int32],
-        capped_out: wp.array[wp.int32],
-        position_out: wp.array[vec3],
-        velocity_out: wp.array[vec3],
-        angular_momentum_out: wp.array[vec3],
-        events_out: EventBuffer,
+        bounces_out: wp.array[wp.int32], capped_out: wp.array[wp.int32],
+        position_out: wp.array[vec3], velocity_out: wp.array[vec3],
+        angular_momentum_out: wp.array[vec3], events_out: EventBuffer,
     ):
         i = wp.tid()
         v = velocity_in[i]
