@@ -129,8 +129,8 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                 resting = gn < -TANGENT_REL * wp.length(g) and (
                     -un <= wp.max(RESTING, -gn * dt * HALF_HOP / (scalar(wp.max(max_bounces, 1))
                                                                 * keep)))
-                on_contact.event(events, frame, sphere, box, int(resting), contact, n,
-                                 (dt - rest) / dt, -un)
+                on_contact.event(frame, sphere, box, int(resting), contact, n,
+                                 (dt - rest) / dt, -un, events)
                 if resting:
                     supported = 1
                     u_sq = wp.dot(u, u)

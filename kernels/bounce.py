@@ -143,8 +143,8 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
                     gap = t * -dn
                     scale = wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))
                     resting = resting and gap <= GAP_ULPS * (scale + wp.length(d))
-                on_contact.event(events, frame, sphere, box, int(resting), contact, n, travelled,
-                                 -vn)
+                on_contact.event(frame, sphere, box, int(resting), contact, n, travelled, -vn,
+                                 events)
                 if resting:
                     supported = 1
                     v = v - vn * n

@@ -42,8 +42,8 @@ def contact_funcs(p: Precision, spin: bool, lossy: bool, events: bool) -> Simple
         return out
 
     @wp.func
-    def write_event(events: EventBuffer, frame: int, sphere: int, box: int, resting: int,
-                    contact: vec3, n: vec3, fraction: scalar, speed: scalar):
+    def write_event(frame: int, sphere: int, box: int, resting: int, contact: vec3, n: vec3,
+                    fraction: scalar, speed: scalar, events: EventBuffer):
         """Append one contact to the launch's event buffer (``data.model_structs``'
         ``EventBuffer``; counted even when it is full); nothing without events."""
         if wp.static(with_events):
