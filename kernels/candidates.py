@@ -7,7 +7,7 @@ for an arc). Every per-box step is the same: the cheap conservative reject (:fun
 path's world bounding box and the box's, grown, apart along an axis), then the exact sweep in the
 box's frame, then keep the closer contact (ties: the lower box index). Only the exact sweep
 depends on the path, and :func:`candidate_funcs` captures it: ``nearest.chord_funcs`` and
-``nearest_arc.arc_funcs_of_boxes`` specialise the loops with the chord's or the arc's.
+``nearest_arc.nearest_arc_funcs`` specialise the loops with the chord's or the arc's.
 
 The candidates come from every box (brute force), from the grid cell of the path's start (when
 the path's query box fits in the cell's margin) or from a BVH query (any order: hence the explicit
@@ -77,7 +77,7 @@ def path_funcs(p: Precision):
     Path = path_struct(p)
     HALF = scalar(0.5)
 
-    @wp.func
+    @wp.func(inline=True)
     def make_path(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, d: vec3, grow: vec3):
         q = Path()
         q.a = a
@@ -108,7 +108,7 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
     PAD_REL = scalar(BOUNDS_PAD_REL)
     PAD_ABS = scalar(BOUNDS_PAD_ABS)
 
-    @wp.func
+    @wp.func(inline=True)
     def apart(q: Path, center: vec3, extent: vec3):
         """The reject: 1 when the path's bounds and the box's (``center +- extent``) are apart
         along a world axis, both grown (``grow``, ``REJECT_SLACK``)."""
@@ -145,13 +145,13 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
                 stride *= broad.dims[i]
         return fits, index
 
-    @wp.func
+    @wp.func(inline=True)
     def grid_fits(q: Path, broad: BroadPhase):
         """:func:`grid_fits_path` for the path's query box (its chord's bounding box grown by
         ``grow (1 + REJECT_SLACK)``): then only the cell's boxes can pass :func:`apart`."""
         return grid_fits_path(q.a, q.end, q.grow * SLACK, broad)
 
-    @wp.func
+    @wp.func(inline=True)
     def bvh_box(q: Path):
         """The BVH query box of the path: the chord's bounding box grown by ``grow (1 +
         REJECT_SLACK)`` and padded (``BOUNDS_PAD_*``), in float32 rounded outward, so every box
@@ -201,7 +201,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
     fallback_bvh = broad_phase in ("bvh", "grid-bvh")
     ZERO = scalar(0.0)
 
-    @wp.func
+    @wp.func(inline=True)
     def candidate(q: Path, boxes: Boxes, k: int, best: int, best_t: scalar, best_n: vec3):
         """Box ``k`` against the best so far: the reject, the exact sweep, and the closer of the
         two contacts kept (ties: the lower box index)."""
@@ -214,7 +214,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
                 best_n = normal
         return best, best_t, best_n
 
-    @wp.func
+    @wp.func(inline=True)
     def nearest_brute(q: Path, boxes: Boxes):
         """The first contact over every box."""
         best = int(-1)
@@ -224,7 +224,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
             best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
         return best, best_t, best_n
 
-    @wp.func
+    @wp.func(inline=True)
     def nearest_cell(q: Path, boxes: Boxes, broad: BroadPhase, cell: int):
         """The first contact over the boxes grid cell ``cell`` lists."""
         best = int(-1)
@@ -235,7 +235,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
                                              best_n)
         return best, best_t, best_n
 
-    @wp.func
+    @wp.func(inline=True)
     def nearest_bvh(q: Path, boxes: Boxes, broad: BroadPhase):
         """The first contact over the boxes a query of the BVH returns (``broad.bvh = 0``, no
         boxes: nothing is hit)."""
@@ -250,7 +250,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
                 best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
         return best, best_t, best_n
 
-    @wp.func
+    @wp.func(inline=True)
     def nearest(q: Path, boxes: Boxes, broad: BroadPhase):
         """The first contact of the path over the boxes, by the broad phase compiled in."""
         box = int(-1)

@@ -133,7 +133,7 @@ def bounce_kernel(features: Features):
     ZERO = scalar(0.0)
     BALLISTIC = features.motion == "ballistic"
 
-    @wp.func
+    @wp.func(inline=True)
     def query_physics(physics: Physics):
         """The model's constants as this query sees them: no gravity for the linear motion,
         the potential's origin at the world origin."""

@@ -32,7 +32,7 @@ def contact_funcs(p: Precision, spin: bool, lossy: bool, events: bool) -> Simple
     friction_spin, potential = dyn.friction_spin, dyn.potential
     ONE = scalar(1.0)
 
-    @wp.func
+    @wp.func(inline=True)
     def contact_spin(L: vec3, u: vec3, n: vec3, r: scalar, m: scalar, physics: Physics):
         """The angular momentum [kg m^2/s] after a contact of normal ``n`` at velocity ``u``
         [m/s] (``dynamics.friction_spin``); ``L`` itself without spin."""
@@ -41,7 +41,7 @@ def contact_funcs(p: Precision, spin: bool, lossy: bool, events: bool) -> Simple
             out = friction_spin(L, u, n, r, m, physics.dt, physics.friction, physics.max_rot)
         return out
 
-    @wp.func
+    @wp.func(inline=True)
     def write_event(frame: int, sphere: int, box: int, resting: int, contact: vec3, n: vec3,
                     fraction: scalar, speed: scalar, events: EventBuffer):
         """Append one contact to the launch's event buffer (``data.model_structs``'
@@ -58,7 +58,7 @@ def contact_funcs(p: Precision, spin: bool, lossy: bool, events: bool) -> Simple
                 events.value[row, 0] = fraction
                 events.value[row, 1] = speed
 
-    @wp.func
+    @wp.func(inline=True)
     def retention_keep(physics: Physics):
         """The factor a lossy bounce scales the speed by, ``sqrt(retention)``; 1 elastic."""
         keep = ONE
@@ -66,7 +66,7 @@ def contact_funcs(p: Precision, spin: bool, lossy: bool, events: bool) -> Simple
             keep = wp.sqrt(physics.retention)
         return keep
 
-    @wp.func
+    @wp.func(inline=True)
     def bounce_loss(energy: scalar, m: scalar, contact: vec3, physics: Physics):
         """The energy [J] after a lossy bounce at ``contact`` [m]: the kinetic part
         ``E - Ep`` scaled by ``retention``; ``energy`` itself elastic."""

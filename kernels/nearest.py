@@ -74,13 +74,13 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         """
         return separate(a + t * d, d, normal, big_r, extent)
 
-    @wp.func
+    @wp.func(inline=True)
     def chord_path(a: vec3, d: vec3, r: scalar):
         """The ``Path`` of a sphere of radius ``r`` [m] whose centre moves from ``a`` by ``d``
         [m]: its bounds grow by ``r`` on every axis, ``t`` runs over ``[0, 1]``."""
         return make_path(a, d, vec3(ZERO, ZERO, ZERO), ONE, r, d, vec3(r, r, r))
 
-    @wp.func
+    @wp.func(inline=True)
     def sweep_chord(q: Path, center: vec3, rotation: mat33, half_extents: vec3,
                     box_radius: scalar):
         """The exact sweep of the chord against one box, in the box's frame.
@@ -117,7 +117,7 @@ def model_nearest_hit(p: Precision, broad_phase: str):
     chord_path = funcs.chord_path
     nearest = candidate_funcs(p, funcs.sweep_chord, broad_phase).nearest
 
-    @wp.func
+    @wp.func(inline=True)
     def nearest_hit(a: vec3, d: vec3, r: scalar, boxes: Boxes, broad: BroadPhase):
         """First contact of the sphere over the boxes, by the broad phase compiled in."""
         return nearest(chord_path(a, d, r), boxes, broad)

@@ -54,7 +54,7 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
         k = EIGHTH * tau * tau
         return vec3(wp.abs(g[0]) * k, wp.abs(g[1]) * k, wp.abs(g[2]) * k)
 
-    @wp.func
+    @wp.func(inline=True)
     def arc_path(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar):
         """The ``Path`` of the arc from ``a`` [m] with velocity ``v`` [m/s] and acceleration
         ``g`` [m/s^2] over ``[0, tau]`` [s], of a sphere of radius ``r`` [m]: the chord's
@@ -62,7 +62,7 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
         d = tau * (v + (HALF * tau) * g)
         return make_path(a, v, g, tau, r, d, sagitta(g, tau) + vec3(r, r, r))
 
-    @wp.func
+    @wp.func(inline=True)
     def sweep_arc(q: Path, center: vec3, rotation: mat33, half_extents: vec3,
                   box_radius: scalar):
         """The exact sweep of the arc against one box, in the box's frame.
@@ -152,7 +152,7 @@ def model_nearest_hit_arc(p: Precision, broad_phase: str):
     nearest_chord = model_nearest_hit(p, broad_phase)
     ZERO = scalar(0.0)
 
-    @wp.func
+    @wp.func(inline=True)
     def nearest_hit_arc(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, boxes: Boxes,
                         broad: BroadPhase):
         """First contact of the sphere's arc over the boxes, by the broad phase compiled in."""

@@ -123,7 +123,7 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
         boxes: the obstacles (float64, world frame).
         p: precision of the arrays and scalars.
         device: Warp device.
-        broad_phase: the kernels' broad phase (``kernels.nearest.BROAD_PHASES``): ``"bvh"`` and
+        broad_phase: the kernels' broad phase (``kernels.data.BROAD_PHASES``): ``"bvh"`` and
             ``"grid-bvh"`` build a BVH over the boxes (``box_bvh``; none without boxes).
         grid: the grid of ``"grid"`` and ``"grid-bvh"`` (:func:`warpsim.broad_phase.choose`).
         dt: frame duration [s]. gravity: [m/s^2]. origin: potential reference point [m].
