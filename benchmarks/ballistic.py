@@ -4,8 +4,8 @@ Run from the repository root: ``python -m benchmarks.ballistic [--quick] [--out 
 Prints three Markdown tables and writes their rows to JSON (default
 ``bench-results/ballistic.json``):
 
-1. error against ``warpsim.reference`` (float64, event-driven, exact) of a swarm dropped onto
-   tilted rounded plates (the bundled ``plates`` scene), after 0.5 s, at dt = 1/30 ... 1/240 s,
+1. error against ``warpsim.analysis.reference`` (float64, event-driven, exact) of a swarm dropped
+   onto tilted rounded plates (the bundled ``plates`` scene), after 0.5 s, at dt = 1/30 ... 1/240 s,
    both precisions, for the ballistic model and (for scale) the linear one, the latter started
    from the same true velocity (its state holds the step velocity ``u - g dt / 2``);
 2. energy drift over 10 000 frames without any correction (ballistic, both precisions; the
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import warpsim as ws
-from warpsim import reference
+from warpsim.analysis import reference
 
 DEFAULT_OUT = "bench-results/ballistic.json"
 STEPS = (1 / 30, 1 / 60, 1 / 120, 1 / 240)

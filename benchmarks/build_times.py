@@ -196,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.child is not None:
         print(json.dumps(child(json.loads(args.child), args.cache)))
         return 0
-    from warpsim.bench import machine, write_json_atomic
+    from warpsim.apps.bench import machine, write_json_atomic
 
     started = time.perf_counter()
     info = machine()

@@ -20,7 +20,7 @@ import numpy as np
 import warp as wp
 
 import warpsim as ws
-from warpsim.bench import machine, write_json_atomic
+from warpsim.apps.bench import machine, write_json_atomic
 
 RESULTS = Path("bench-results")
 """Where the studies write their JSON (created), relative to the working directory."""
@@ -107,7 +107,7 @@ def parser(prog: str, doc: str) -> argparse.ArgumentParser:
 
 def start(name: str, args: argparse.Namespace):
     """Initialise Warp and describe the run. Returns ``(device, machine dict, out path)``."""
-    from warpsim.cli import init_warp
+    from warpsim.apps.startup import init_warp
     from warpsim.device import resolve_device
 
     init_warp(debug=False)  # without Warp's start-up lines

@@ -1,44 +1,41 @@
 """USD export of warpsim results; imported only when used, so ``import warpsim`` never needs pxr.
 
-Import it as ``warpsim.export``.
+Import it as ``warpsim.export``. The names below load their module (and pxr, Pillow) on first
+use, so ``warpsim.export.files`` (standard library only) never loads pxr.
 """
+
+import importlib
 
 if __name__ != "warpsim.export":  # imported as a bare ``export``: the package would load twice
     raise ImportError("import this package as 'warpsim.export', not as 'export'")
 
-# The guard must run first, so these imports come after it on purpose.
-from .files import check_writable  # noqa: E402
-from .preview import draw_frame, render_preview  # noqa: E402
-from .usd import (  # noqa: E402
-    LargeOutputWarning,
-    estimate_usd_bytes,
-    half_orientations,
-    read_usd,
-    read_usd_boxes,
-    read_usd_frame,
-    usd_format,
-    write_usd,
-)
+#: public name -> the module defining it
+_HOMES = {
+    "LargeOutputWarning": "usd_write",
+    "check_writable": "files",
+    "draw_frame": "preview",
+    "estimate_usd_bytes": "usd_write",
+    "half_orientations": "usd_write",
+    "read_usd": "usd_read",
+    "read_usd_boxes": "usd_read",
+    "read_usd_frame": "usd_read",
+    "render_movie": "movie",  # imageio is an optional extra, imported when a movie is made
+    "render_preview": "preview",
+    "usd_format": "usd_write",
+    "write_usd": "usd_write",
+}
 
-__all__ = [
-    "LargeOutputWarning",
-    "check_writable",
-    "draw_frame",
-    "estimate_usd_bytes",
-    "half_orientations",
-    "read_usd",
-    "read_usd_boxes",
-    "read_usd_frame",
-    "render_movie",
-    "render_preview",
-    "usd_format",
-    "write_usd",
-]
+__all__ = sorted(_HOMES)
 
 
 def __getattr__(name):
-    if name == "render_movie":  # imageio is an optional extra: loaded on first use
-        from .movie import render_movie
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module 'warpsim.export' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{home}", __name__), name)
+    globals()[name] = value
+    return value
 
-        return render_movie
-    raise AttributeError(f"module 'warpsim.export' has no attribute {name!r}")
+
+def __dir__():
+    return sorted(set(globals()) | set(_HOMES))

@@ -7,7 +7,7 @@ A sharded run (:mod:`warpsim.distributed`) writes::
     RUN.shards/shard_00000.usdc    one layer per shard: the shard's sphere instancer only
     RUN.shards/shard_00001.usdc    ...
 
-Root stage layout (the conventions of :mod:`warpsim.export.usd`: ``Y`` up, 1 unit = 1 m,
+Root stage layout (the conventions of :mod:`warpsim.export.usd_write`: ``Y`` up, 1 unit = 1 m,
 default prim ``/World``, integer frame indices as time codes, ``timeCodesPerSecond`` =
 ``framesPerSecond`` = ``1 / dt``)::
 
@@ -51,17 +51,8 @@ from pxr import Sdf, Tf, Usd, UsdGeom, Vt
 
 from ..trajectory import Trajectory
 from .files import atomic_output
-from .usd import (
-    DEGREES_PER_RADIAN,
-    PROTOTYPE,
-    SPHERES,
-    WORLD,
-    half_orientations,
-    instancer_state,
-    recorded_frames,
-    sphere_radii,
-    write_usd,
-)
+from .usd_read import instancer_state, recorded_frames, sphere_radii
+from .usd_write import DEGREES_PER_RADIAN, PROTOTYPE, SPHERES, WORLD, half_orientations, write_usd
 
 SPHERE_SHAPES = f"{WORLD}/SphereShapes"
 SPHERE_SHAPE = f"{SPHERE_SHAPES}/CheckerBall"

@@ -13,7 +13,7 @@ import numpy as np
 
 from .files import atomic_output
 from .preview import AZIMUTH_DEG, ELEVATION_DEG, Renderer, _size, _view_angles, scene_bounds
-from .usd import read_usd, read_usd_boxes
+from .usd_read import read_usd, read_usd_boxes
 
 MOVIE_SUFFIXES = (".mp4", ".gif")
 GIF_TICK_S = 0.01  # GIF frame durations are whole hundredths of a second

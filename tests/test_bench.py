@@ -1,6 +1,6 @@
-"""``warpsim bench``: the throughput measure of one scene, through ``warpsim.bench.main`` and the
-console script. Figures are checked for consistency and against an analytic bounce count, never
-for speed."""
+"""``warpsim bench``: the throughput measure of one scene, through ``warpsim.apps.bench.main``
+and the console script. Figures are checked for consistency and against an analytic bounce
+count, never for speed."""
 
 import inspect
 import json
@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 import warpsim as ws
-from warpsim import bench
+from warpsim.apps import bench
 
 #: Two walls with inner faces at x = -1 and x = +1, no gravity, point spheres starting at
 #: x = 0.25 at 30 m/s along +x: 0.5 m per frame at dt = 1/60 s, so the centre is at 0.75 after
@@ -140,7 +140,7 @@ def test_unwritable_json_is_refused_before_the_run(tmp_path, capsys):
 
 def console(*args):
     exe = shutil.which("warpsim")
-    cmd = [exe] if exe else [sys.executable, "-m", "warpsim.cli"]
+    cmd = [exe] if exe else [sys.executable, "-m", "warpsim.apps.cli"]
     return subprocess.run([*cmd, "bench", *map(str, args)], capture_output=True, text=True,
                           timeout=300, cwd=Path(__file__).resolve().parent)
 

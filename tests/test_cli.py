@@ -11,7 +11,7 @@ import warpsim as ws
 
 
 def warpsim(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "warpsim.cli", *map(str, args)], cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "warpsim.apps.cli", *map(str, args)], cwd=cwd,
                           capture_output=True, text=True, timeout=300)
 
 
@@ -75,7 +75,7 @@ def test_run_default_output_name_in_working_directory(tmp_path):
 def test_errors_are_one_line_and_nonzero(args, message, tmp_path, capsys, monkeypatch):
     """In this process (the entry point the console script calls), for speed; the subprocess
     tests below check the real standard error, Warp's native output included."""
-    from warpsim.cli import main
+    from warpsim.apps.cli import main
 
     monkeypatch.chdir(tmp_path)
     try:
@@ -124,7 +124,7 @@ def test_debug_shows_the_traceback(tmp_path):
 
 def cli(capsys, *args, cwd=None, monkeypatch=None):
     """``warpsim ARGS`` in this process: (exit code, stdout, stderr)."""
-    from warpsim.cli import main
+    from warpsim.apps.cli import main
 
     if cwd is not None:
         monkeypatch.chdir(cwd)
@@ -239,39 +239,29 @@ def test_preview_movie(tmp_path, capsys):
 
 
 def test_velocities_and_events_options(tmp_path, capsys):
-    """Motion data and contact events, where this simulator records them."""
-    import inspect
-
-    params = inspect.signature(ws.Simulator.run).parameters
+    """Motion data and contact events: the file holds the simulator's own values."""
     usd = tmp_path / "w.usdc"
-    if "velocities" in params:
-        code, out, err = cli(capsys, "run", "wedge", "-n", 6, "--frames", 5, "--seed", 3,
-                             "-o", usd, "--velocities", "--no-progress")
-        assert code == 0, err
-        traj = ws.export.read_usd(usd)
-        scene = ws.Scene.load("wedge")
-        expected = ws.Simulator(scene, scene.spawn(n=6, seed=3)).run(5, velocities=True)
-        # the file holds the simulator's velocities at each recorded frame, to the float32 bit
-        np.testing.assert_array_equal(traj.velocity, expected.velocity.astype(np.float32))
-        np.testing.assert_allclose(traj.angular_velocity, expected.angular_velocity,
-                                   rtol=1e-6, atol=1e-30)
-    else:
-        code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--velocities")
-        assert code != 0 and "does not record velocities" in one_error_line(err)
-    if "events" in params:
-        pytest.importorskip("pyarrow")
-        events = tmp_path / "hits.parquet"
-        code, out, err = cli(capsys, "run", "wedge", "-n", 6, "--frames", 5, "-o", usd,
-                             "--events", events, "--no-progress")
-        assert code == 0, err
-        assert len(ws.events.ContactEvents.read_parquet(events)) > 0
-    else:
-        code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--events",
-                           tmp_path / "hits.parquet")
-        assert code != 0 and "does not record contact events" in one_error_line(err)
+    code, out, err = cli(capsys, "run", "wedge", "-n", 6, "--frames", 5, "--seed", 3,
+                         "-o", usd, "--velocities", "--no-progress")
+    assert code == 0, err
+    traj = ws.export.read_usd(usd)
+    scene = ws.Scene.load("wedge")
+    expected = ws.Simulator(scene, scene.spawn(n=6, seed=3)).run(5, velocities=True)
+    # the file holds the simulator's velocities at each recorded frame, to the float32 bit
+    np.testing.assert_array_equal(traj.velocity, expected.velocity.astype(np.float32))
+    np.testing.assert_allclose(traj.angular_velocity, expected.angular_velocity,
+                               rtol=1e-6, atol=1e-30)
     code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--events", tmp_path / "hits.csv")
     assert code != 0 and ".parquet" in one_error_line(err)
-    assert "hits.parquet" not in [p.name for p in tmp_path.iterdir()] or "events" in params
+    assert "hits.parquet" not in [p.name for p in tmp_path.iterdir()]
+    code, _, err = cli(capsys, "run", "wedge", "-o", usd, "--events-capacity", 8)
+    assert code != 0 and "--events-capacity needs --events" in one_error_line(err)
+    pytest.importorskip("pyarrow")
+    events = tmp_path / "hits.parquet"
+    code, out, err = cli(capsys, "run", "wedge", "-n", 6, "--frames", 5, "-o", usd,
+                         "--events", events, "--no-progress")
+    assert code == 0, err
+    assert len(ws.ContactEvents.read_parquet(events)) > 0
 
 
 def test_warp_start_up_chatter_is_silenced_and_bad_device_is_one_line(tmp_path):
@@ -294,15 +284,9 @@ def test_forwarded_commands_show_their_own_usage():
     assert first.startswith("usage: warpsim bench")
 
 
-def test_accuracy_is_forwarded(capsys):
-    import importlib.util
+def test_accuracy_is_forwarded():
+    from warpsim.apps.cli import main
 
-    from warpsim.cli import main
-
-    if importlib.util.find_spec("warpsim.accuracy") is None:
-        assert main(["accuracy", "--help"]) != 0
-        assert "accuracy study is not part" in one_error_line(capsys.readouterr().err)
-    else:
-        with pytest.raises(SystemExit) as info:
-            main(["accuracy", "--help"])
-        assert info.value.code == 0
+    with pytest.raises(SystemExit) as info:
+        main(["accuracy", "--help"])
+    assert info.value.code == 0

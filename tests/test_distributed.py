@@ -209,7 +209,7 @@ def test_rerun_recomputes_only_missing_and_stale_shards(scene, reference, client
 
 
 def test_cli_runs_on_a_scheduler_address(client, tmp_path, capsys):
-    from warpsim.cli import main
+    from warpsim.apps.cli import main
 
     out = tmp_path / "cli.usdc"
     code = main(["run", SCENE, "-n", "32", "--frames", "6", "--block", "16", "--shards", "2",

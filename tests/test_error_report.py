@@ -1,4 +1,4 @@
-"""The error report (``warpsim.reference.compare``) on tiny runs, checked against analytic
+"""The error report (``warpsim.analysis.compare``) on tiny runs, checked against analytic
 answers: free flight is exact for semi-implicit Euler from the model's own start velocity, and a
 floor bounce's contact time is known in closed form."""
 
@@ -9,7 +9,7 @@ import pytest
 from conftest import closed_room
 
 import warpsim as ws
-from warpsim import error_report, reference
+from warpsim.analysis import error_report, reference
 
 G = 9.81
 
@@ -26,7 +26,7 @@ def test_free_flight_has_no_error_but_rounding():
                      velocity=[[1.0, 2.0, 0.0], [-0.5, 0.0, 0.3]], radius=0.05)
     sim = ws.Simulator(scene, swarm, dt=1 / 60, precision="float64")
     sim.run(30)  # 0.5 s: no sphere reaches the floor
-    rep = reference.compare(sim, scene, swarm, sample=2)
+    rep = error_report.compare(sim, scene, swarm, sample=2)
     assert rep.horizon == pytest.approx(0.5)
     for key in ("0.1 s", "0.5 s"):
         assert rep.position_error[key]["max_m"] < 1e-13
@@ -47,7 +47,7 @@ def test_floor_bounce_contact_time_and_error_figures():
     dt = 1 / 120
     sim = ws.Simulator(scene, swarm, dt=dt, precision="float64")
     sim.run(round(1.0 / dt))
-    rep = reference.compare(sim, scene, swarm, sample=4, seed=3)
+    rep = error_report.compare(sim, scene, swarm, sample=4, seed=3)
     assert len(rep.sample) == 4 and len(set(rep.sample.tolist())) == 4
     c = rep.contacts
     assert c["compared"] == 4 and c["mismatched_spheres"] == 0
@@ -56,7 +56,7 @@ def test_floor_bounce_contact_time_and_error_figures():
         swarm, error_report.initial_velocity(swarm, dt, scene.gravity, "linear")), 1.0)
     u0 = 0.5 * G * dt
     t_hit = (-u0 + np.sqrt(u0 ** 2 + 2 * G * h)) / G
-    assert abs(ref.events[0].time[0] - t_hit) < 1e-12
+    assert abs(ref.events.of_sphere(0).time[0] - t_hit) < 1e-12
     assert c["time_error_max_s"] < dt
     assert c["position_error_max_m"] < G * t_hit * dt
     assert set(rep.position_error) == {"0.1 s", "0.5 s", "1 s"}
@@ -78,7 +78,7 @@ def test_lossy_run_is_judged_by_energy_against_the_reference():
                      radius=r)
     sim = ws.Simulator(scene, swarm, dt=1 / 120, precision="float64")
     sim.run(120)
-    rep = reference.compare(sim, scene, swarm, sample=2)
+    rep = error_report.compare(sim, scene, swarm, sample=2)
     assert rep.invariants["energy_drift_max"] is None  # lost by design: no drift to speak of
     assert rep.energy["max_relative"] < 1e-9
     assert "energy drift" not in rep.summary()
@@ -91,8 +91,8 @@ def test_trajectory_input_gives_the_same_position_errors():
                      velocity=rng.normal(0, 2.0, (8, 3)), radius=0.05)
     sim = ws.Simulator(scene, swarm, dt=1 / 60, precision="float64")
     traj = sim.run(60)
-    from_sim = reference.compare(sim, scene, swarm, sample=5, seed=2)
-    from_traj = reference.compare(traj, scene, swarm, sample=5, seed=2)
+    from_sim = error_report.compare(sim, scene, swarm, sample=5, seed=2)
+    from_traj = error_report.compare(traj, scene, swarm, sample=5, seed=2)
     np.testing.assert_array_equal(from_sim.sample, from_traj.sample)
     for key in from_sim.position_error:
         assert from_traj.position_error[key]["max_m"] == pytest.approx(
@@ -112,22 +112,24 @@ def test_contacts_from_frames_of_a_linear_bounce():
     vel = [v, v, v_out, v_out]
     found = error_report.contacts_from_frames(np.array(frames)[:, None], np.array(vel)[:, None],
                                               dt, g, "linear")
-    np.testing.assert_allclose(found.time[0], [dt + tau], atol=1e-12)
-    np.testing.assert_allclose(found.normal[0], [[0.0, 1.0, 0.0]], atol=1e-12)
-    np.testing.assert_allclose(found.position[0], [contact], atol=1e-12)
+    np.testing.assert_allclose(found.time, [dt + tau], atol=1e-12)
+    np.testing.assert_allclose(found.normal, [[0.0, 1.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(found.position, [contact], atol=1e-12)
+    assert found.frame.tolist() == [2] and found.sphere.tolist() == [0]
+    np.testing.assert_allclose(found.fraction, [tau / dt], atol=1e-12)
 
 
 def test_bad_arguments():
     scene = floor_scene()
     swarm = ws.Swarm(position=[[0.0, 1.0, 0.0]], velocity=[[0.0, 0.0, 0.0]])
     with pytest.raises(ValueError, match="sample"):
-        reference.compare(ws.Simulator(scene, swarm), scene, swarm, sample=0)
+        error_report.compare(ws.Simulator(scene, swarm), scene, swarm, sample=0)
     with pytest.raises(ValueError, match="sim_or_trajectory"):
-        reference.compare("run", scene, swarm)
+        error_report.compare("run", scene, swarm)
     sim = ws.Simulator(scene, swarm)
     traj = sim.run(10, every=2)
     with pytest.raises(ValueError, match="every frame"):
-        reference.compare(traj, scene, swarm)
+        error_report.compare(traj, scene, swarm)
 
 
 def test_ballistic_run_agrees_with_the_reference_at_every_step_size():
@@ -142,7 +144,7 @@ def test_ballistic_run_agrees_with_the_reference_at_every_step_size():
         except TypeError:
             pytest.skip("this warpsim.Simulator has no motion='ballistic'")
         sim.run(round(0.5 / dt))
-        rep = reference.compare(sim, scene, swarm, sample=24)
+        rep = error_report.compare(sim, scene, swarm, sample=24)
         assert rep.settings["motion"] == "ballistic"
         assert rep.settings["convention_offset_m_per_s"] == 0.0
         assert rep.position_error["0.5 s"]["max_m"] < 1e-7

@@ -35,7 +35,7 @@ def test_drop_on_a_floor_matches_the_scheme(device, precision):
     tol = 1e-4 if precision == "float32" else 1e-9
     assert ev.frame[first] == k
     assert ev.box[first] == 0
-    assert not ev.resting[first]
+    assert ev.kind[first] == ws.ContactKind.BOUNCE
     assert ev.fraction[first] == pytest.approx(fraction, abs=tol * 100)
     np.testing.assert_allclose(ev.normal[first], [0, 1, 0], atol=tol)
     assert ev.normal_speed[first] == pytest.approx(-v, rel=tol)
@@ -95,3 +95,19 @@ def test_overflow_is_counted_never_silent():
     assert ev.dropped > 0
     assert len(ev) + ev.dropped == sim.stats.bounces
     assert len(ev) <= 50 * 2  # two launches at most fill their buffers
+
+
+def test_the_kernels_write_the_contact_kinds_of_the_vocabulary(device, precision):
+    """A dropped ball's first contact is a BOUNCE; once it lies on the floor every contact is a
+    SUPPORT: the kernels' 0/1 in the event buffer are :class:`warpsim.ContactKind`'s values."""
+    r = 0.1
+    floor = ws.RoundedBoxes(center=[[0, -0.5, 0]], half_extents=[[10, 0.5, 10]])
+    scene = ws.Scene(floor, energy_retention=0.5)
+    sim = ws.Simulator(scene, ws.Swarm([[0.0, r + 0.2, 0.0]], [[0, 0, 0]], radius=r), dt=DT,
+                       precision=precision, device=device)
+    ev = sim.run(240, every=240, events=True).events
+    assert ev.kind[0] == ws.ContactKind.BOUNCE
+    assert ev.kind[-1] == ws.ContactKind.SUPPORT
+    assert set(ev.kind.tolist()) == {int(k) for k in ws.ContactKind}
+    late = ev.frame > 200  # long at rest: supported, never reflected
+    assert late.any() and np.all(ev.kind[late] == ws.ContactKind.SUPPORT)

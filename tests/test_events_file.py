@@ -6,44 +6,61 @@ import sys
 import numpy as np
 import pytest
 
-from warpsim.events import ContactEvents
+from warpsim import ContactEvents, ContactKind
 
 
 def make_events(n=7, seed=0, dropped=0):
     rng = np.random.default_rng(seed)
     normal = rng.normal(size=(n, 3))
-    return ContactEvents(frame=np.sort(rng.integers(1, 100, n)), fraction=rng.uniform(0, 1, n),
-                         sphere=rng.integers(0, 1_000_000_000_000, n),
-                         box=rng.integers(0, 50, n).astype(np.int32),
-                         position=rng.normal(size=(n, 3)) * 1e4,
-                         normal=normal / np.linalg.norm(normal, axis=1, keepdims=True),
-                         normal_speed=rng.uniform(0, 300, n), resting=rng.random(n) < 0.3,
-                         dropped=dropped)
+    return ContactEvents.of_frames(
+        1 / 60, frame=np.sort(rng.integers(1, 100, n)), fraction=rng.uniform(0, 1, n),
+        sphere=rng.integers(0, 1_000_000_000_000, n), box=rng.integers(0, 50, n).astype(np.int32),
+        position=rng.normal(size=(n, 3)) * 1e4,
+        normal=normal / np.linalg.norm(normal, axis=1, keepdims=True),
+        normal_speed=rng.uniform(0, 300, n), kind=rng.random(n) < 0.3, dropped=dropped)
 
 
 def test_columns_have_their_types_and_inputs_are_copied():
     frame = np.array([3, 4])
-    events = ContactEvents(frame=frame, fraction=[0.0, 1.0], sphere=[1, 2], box=[0, 5],
-                           position=[[0, 0, 0], [1, 2, 3]], normal=[[0, 1, 0], [1, 0, 0]],
-                           normal_speed=[0.0, 2.5], resting=[True, False])
+    events = ContactEvents.of_frames(0.5, frame=frame, fraction=[0.0, 1.0], sphere=[1, 2],
+                                     box=[0, 5], position=[[0, 0, 0], [1, 2, 3]],
+                                     normal=[[0, 1, 0], [1, 0, 0]], normal_speed=[0.0, 2.5],
+                                     kind=[ContactKind.SUPPORT, ContactKind.BOUNCE])
     frame[0] = 99
     assert events.frame.tolist() == [3, 4]  # a copy, not a view of the caller's array
+    assert events.time.tolist() == [1.0, 2.0]  # (frame - 1 + fraction) dt
     assert (events.frame.dtype, events.fraction.dtype, events.sphere.dtype, events.box.dtype,
-            events.resting.dtype) == (np.int64, np.float64, np.int64, np.int32, np.bool_)
+            events.kind.dtype) == (np.int64, np.float64, np.int64, np.int32, np.int8)
     assert len(events) == 2 and events.dropped == 0
     assert repr(events) == "ContactEvents(2 contacts, frames 3..4, dropped=0)"
     assert len(ContactEvents.empty(dropped=4)) == 0
+    assert events.bounces().sphere.tolist() == [2] and events.of_sphere(1).box.tolist() == [0]
+
+
+def test_a_table_without_frames_is_continuous_time():
+    """The exact reference's contacts have no frame: time alone, the same columns else."""
+    events = ContactEvents(time=[0.25, 0.5], sphere=[0, 0], box=[3, -1],
+                           position=[[0, 1, 0]] * 2, normal=[[0, 1, 0]] * 2,
+                           normal_speed=[2.0, -0.5], kind=[0, 1])
+    assert events.frame is None and events.fraction is None
+    assert repr(events) == "ContactEvents(2 contacts, 0.25..0.5 s, dropped=0)"
+    both = ContactEvents.concatenate([events, events.select([1])])
+    assert both.time.tolist() == [0.25, 0.5, 0.5] and both.kind.tolist() == [0, 1, 1]
+    with pytest.raises(ValueError, match="frame and fraction go together"):
+        ContactEvents(time=[0.0], sphere=[0], box=[0], position=[[0, 0, 0]],
+                      normal=[[0, 1, 0]], normal_speed=[1.0], kind=[0], frame=[1])
 
 
 @pytest.mark.parametrize("field, value, match", [
     ("fraction", [0.5, 1.5], r"fraction\[1\]"), ("fraction", [np.nan, 0.5], r"fraction\[0\]"),
-    ("normal_speed", [1.0, -0.1], r"normal_speed\[1\]"),
+    ("normal_speed", [1.0, -0.1], r"normal_speed\[1\] must be >= 0 for a bounce"),
+    ("kind", [0, 2], r"kind\[1\] must be one of \[0, 1\]"), ("box", [0, -2], r"box\[1\]"),
     ("position", [[0, 0, 0]], "position has 1 rows"), ("normal", [0, 1, 0], "normal must"),
     ("dropped", -1, "dropped"), ("dropped", True, "dropped")])
 def test_bad_tables_are_refused_naming_the_field(field, value, match):
-    good = dict(frame=[1, 2], fraction=[0.5, 0.5], sphere=[0, 1], box=[0, 0],
+    good = dict(time=[0.5, 1.5], frame=[1, 2], fraction=[0.5, 0.5], sphere=[0, 1], box=[0, 0],
                 position=[[0, 0, 0]] * 2, normal=[[0, 1, 0]] * 2, normal_speed=[1.0, 1.0],
-                resting=[False, False])
+                kind=[0, 0])
     good[field] = value
     with pytest.raises(ValueError, match=match):
         ContactEvents(**good)
@@ -54,8 +71,8 @@ def test_parquet_round_trip_is_exact(tmp_path):
     events = make_events(dropped=12)
     out = events.write_parquet(tmp_path / "hits.parquet")
     back = ContactEvents.read_parquet(out)
-    for name in ("frame", "fraction", "sphere", "box", "position", "normal", "normal_speed",
-                 "resting"):
+    for name in ("frame", "fraction", "time", "sphere", "box", "position", "normal",
+                 "normal_speed", "kind"):
         np.testing.assert_array_equal(getattr(back, name), getattr(events, name))
         assert getattr(back, name).dtype == getattr(events, name).dtype
     assert back.dropped == 12
@@ -67,9 +84,9 @@ def test_parquet_columns_for_other_tools(tmp_path):
     pq = pytest.importorskip("pyarrow.parquet")
     events = make_events()
     table = pq.read_table(events.write_parquet(tmp_path / "hits.parquet"))
-    assert table.column_names == ["frame", "fraction", "sphere", "box", "position_x",
+    assert table.column_names == ["frame", "fraction", "time", "sphere", "box", "position_x",
                                   "position_y", "position_z", "normal_x", "normal_y",
-                                  "normal_z", "normal_speed", "resting"]
+                                  "normal_z", "normal_speed", "kind"]
     np.testing.assert_array_equal(table.column("position_y").to_numpy(), events.position[:, 1])
 
 
@@ -105,11 +122,12 @@ def test_hits_per_box_with_pandas():
     pytest.importorskip("pandas")
     events = make_events(n=200, seed=3)
     df = events.to_pandas()
-    hits = df[~df.resting].groupby("box").size()
-    expected = np.bincount(events.box[~events.resting], minlength=50)
+    hits = df[df.kind == ContactKind.BOUNCE].groupby("box").size()
+    bounce = events.kind == ContactKind.BOUNCE
+    expected = np.bincount(events.box[bounce], minlength=50)
     for box, count in hits.items():
         assert count == expected[box]
-    assert hits.sum() == np.count_nonzero(~events.resting)
+    assert hits.sum() == np.count_nonzero(bounce)
     assert df.attrs["dropped"] == 0
 
 
@@ -131,6 +149,6 @@ def test_readme_hits_per_box_example_runs(tmp_path, monkeypatch, capsys):
     exec(compile(code, "README.md", "exec"), {})  # noqa: S102
     printed = capsys.readouterr().out
     assert "mean_speed" in printed and "hits" in printed
-    boxes_hit = np.unique(events.box[~events.resting])
+    boxes_hit = np.unique(events.bounces().box)
     lines = [line.split()[0] for line in printed.strip().splitlines()[2:]]  # rows after header
     assert lines == [str(b) for b in boxes_hit]  # one row per box hit, in box order

@@ -1,4 +1,4 @@
-"""The exact reference (``warpsim.reference``) against analytic answers.
+"""The exact reference (``warpsim.analysis.reference``) against analytic answers.
 
 Every expected value here comes from closed-form physics (free fall, mirror images, contact
 points built backwards from a chosen contact), never from the code under test.
@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import warpsim as ws
-from warpsim import reference
+from warpsim.analysis import reference
 
 G = 9.81
 
@@ -48,8 +48,8 @@ def test_floor_bounce_times_are_odd_multiples_of_the_fall_time():
     t0 = np.sqrt(2 * h / G)
     run = reference.simulate(floor_scene(), one([0.0, h + r, 0.0], [0.7, 0.0, 0.0], r),
                              t_end=10.5 * t0)
-    ev = run.events[0]
-    assert np.all(ev.kind == reference.BOUNCE)
+    ev = run.events.of_sphere(0)
+    assert np.all(ev.kind == ws.ContactKind.BOUNCE)
     np.testing.assert_allclose(ev.time, t0 * (1 + 2 * np.arange(5)), rtol=0, atol=TIME_TOL)
     np.testing.assert_allclose(ev.normal, np.tile([0.0, 1.0, 0.0], (5, 1)), atol=1e-15)
     np.testing.assert_allclose(ev.position[:, 1], r, atol=POS_TOL)
@@ -82,7 +82,8 @@ def test_wall_mirror_without_gravity():
     expected = free.copy()
     expected[0] = 2 * plane - free[0]
     np.testing.assert_allclose(run.position[-1, 0], expected, atol=POS_TOL)
-    np.testing.assert_allclose(run.events[0].time, [(plane - x0[0]) / v[0]], atol=TIME_TOL)
+    np.testing.assert_allclose(run.events.of_sphere(0).time, [(plane - x0[0]) / v[0]],
+                               atol=TIME_TOL)
 
 
 @pytest.mark.parametrize("far", [0.0, 1e4], ids=["origin", "far"])
@@ -111,8 +112,8 @@ def test_edge_and_corner_contacts_of_a_rotated_rounded_box(feature, far):
     box = ws.RoundedBoxes(center=[center], half_extents=[h], rotation=[q], radius=[rb])
     scene = ws.Scene(box, gravity=(0.0, 0.0, 0.0))
     run = reference.simulate(scene, one(x0, v, r), t_end=1.0)
-    ev = run.events[0]
-    assert len(ev) == 1 and ev.kind[0] == reference.BOUNCE
+    ev = run.events.of_sphere(0)
+    assert len(ev) == 1 and ev.kind[0] == ws.ContactKind.BOUNCE
     scale = max(1.0, far)
     assert abs(ev.time[0] - t_hit) < TIME_TOL * scale
     np.testing.assert_allclose(ev.normal[0], n, atol=1e-9 * scale)
@@ -133,7 +134,7 @@ def test_near_miss_of_an_edge_is_not_a_contact():
     scene = ws.Scene(ws.RoundedBoxes(center=[[0, 0, 0]], half_extents=[h], radius=[rb]),
                      gravity=(0.0, 0.0, 0.0))
     run = reference.simulate(scene, one(x0, v, r), t_end=1.0)
-    assert len(run.events[0]) == 0
+    assert len(run.events.of_sphere(0)) == 0
     np.testing.assert_allclose(run.position[-1, 0], x0 + v, atol=1e-12)
 
 
@@ -154,7 +155,7 @@ def test_tilted_plane_bounce_and_slide():
     y_hit = ((plate.radius[0] + r) - n[0] * x0[0]) / n[1]
     t_hit = np.sqrt(2 * (x0[1] - y_hit) / G)
     run = reference.simulate(scene, one(x0, [0.0, 0.0, 0.0], r), t_end=t_hit + 0.05)
-    ev = run.events[0]
+    ev = run.events.of_sphere(0)
     assert abs(ev.time[0] - t_hit) < TIME_TOL
     np.testing.assert_allclose(ev.normal[0], n, atol=1e-12)
     u = np.array([0.0, -G * t_hit, 0.0])
@@ -168,7 +169,7 @@ def test_tilted_plane_bounce_and_slide():
     down = np.array([-np.cos(angle), -np.sin(angle), 0.0])
     expected = start + down * 0.5 * G * np.sin(angle) * t * t
     np.testing.assert_allclose(run.position[-1, 0], expected, atol=1e-10)
-    assert np.all(run.events[0].kind == reference.SUPPORT)
+    assert np.all(run.events.of_sphere(0).kind == ws.ContactKind.SUPPORT)
 
 
 def test_sawtooth_between_two_walls_without_gravity():
@@ -182,13 +183,13 @@ def test_sawtooth_between_two_walls_without_gravity():
     # unfolded path: s = speed t from x = 0; triangle wave of period 2 gap
     s = (speed * times + gap / 2) % (2 * gap)
     expected = np.where(s < gap, s, 2 * gap - s) - gap / 2
-    count = len(run.events[0])
+    count = len(run.events.of_sphere(0))
     assert count == int((20.0 - period_of(gap, speed) / 2) // period_of(gap, speed)) + 1
     # each contact happens up to a skin early (2e-13 m here): the path loses up to two skins
     tol = SKIN_BOUND * 2 * count
     np.testing.assert_allclose(run.position[:, 0, 0], expected, atol=tol)
     period = period_of(gap, speed)
-    np.testing.assert_allclose(run.events[0].time, period / 2 + period * np.arange(count),
+    np.testing.assert_allclose(run.events.of_sphere(0).time, period / 2 + period * np.arange(count),
                                atol=tol / speed)
 
 
@@ -212,7 +213,7 @@ def test_energy_constant_over_10_s_in_a_closed_room():
     e = run.energy(scene, swarm)
     drift = np.abs(e - e[0]).max(axis=0) / np.abs(e[0])
     assert drift.max() < ENERGY_REL_TOL
-    assert min(len(ev) for ev in run.events) > 10
+    assert min(len(run.events.of_sphere(i)) for i in range(len(run.incomplete))) > 10
     gaps = scene.boxes.signed_distance(run.position.reshape(-1, 3)).min(axis=1) - 0.05
     assert gaps.min() > -1e-12
 
@@ -224,12 +225,12 @@ def test_start_on_a_surface(moving):
          "still": [0.0, 0.0, 0.0]}[moving]
     run = reference.simulate(floor_scene(gravity=(0.0, 0.0, 0.0)), one([0, r, 0], v, r), 1.0)
     assert not run.incomplete.any()
-    ev = run.events[0]
+    ev = run.events.of_sphere(0)
     if moving == "away":
         assert len(ev) == 0
         np.testing.assert_allclose(run.position[-1, 0], [0.5, r + 2.0, 0.0], atol=1e-12)
     elif moving == "in":  # a hit at t = 0, then away
-        assert len(ev) == 1 and ev.time[0] == 0.0 and ev.kind[0] == reference.BOUNCE
+        assert len(ev) == 1 and ev.time[0] == 0.0 and ev.kind[0] == ws.ContactKind.BOUNCE
         np.testing.assert_allclose(run.position[-1, 0], [0.5, r + 2.0, 0.0], atol=1e-12)
     else:  # slides along it (or stays) without gravity: no contact
         assert len(ev) == 0
@@ -241,7 +242,7 @@ def test_sliding_down_a_wall_exactly_along_it():
     wall = ws.RoundedBoxes(center=[[1.0, 0.0, 0.0]], half_extents=[[0.5, 50.0, 5.0]])
     r = 0.25
     run = reference.simulate(ws.Scene(wall), one([0.25, 0.0, 0.0], [0.0, 1.0, 0.3], r), 2.0)
-    assert len(run.events[0]) == 0 and not run.incomplete.any()
+    assert len(run.events.of_sphere(0)) == 0 and not run.incomplete.any()
     np.testing.assert_allclose(run.position[-1, 0], [0.25, 2.0 - 0.5 * G * 4.0, 0.6],
                                atol=1e-12)
 
@@ -260,8 +261,8 @@ def test_grazing_arc_touches_a_ceiling_at_its_apex(offset):
     run = reference.simulate(ws.Scene(ceiling), one([0, 0, 0], [vx, vy, 0.0], r), t)
     free = np.array([vx * t, 0.0, 0.0])
     if offset < 0:
-        ev = run.events[0]
-        assert len(ev) == 1 and ev.kind[0] == reference.BOUNCE
+        ev = run.events.of_sphere(0)
+        assert len(ev) == 1 and ev.kind[0] == ws.ContactKind.BOUNCE
         # hit at height apex - 1e-9: the vertical speed there is sqrt(2 g 1e-9)
         w = np.sqrt(2 * G * 1e-9)
         assert abs(ev.normal_speed[0] - w) < 1e-6
@@ -279,7 +280,7 @@ def test_point_sphere_on_zero_thickness_plate_never_crosses():
                              3.0, times)
     assert np.all(run.position[:, 0, 1] >= 0.0)
     t0 = np.sqrt(2 * 0.5 / G)
-    np.testing.assert_allclose(run.events[0].time[:2], [t0, 3 * t0], atol=TIME_TOL)
+    np.testing.assert_allclose(run.events.of_sphere(0).time[:2], [t0, 3 * t0], atol=TIME_TOL)
 
 
 def test_lossy_ball_comes_to_rest_without_a_zeno_loop():
@@ -288,14 +289,14 @@ def test_lossy_ball_comes_to_rest_without_a_zeno_loop():
     k, h, r = 0.7, 1.0, 0.1
     run = reference.simulate(floor_scene(energy_retention=k),
                              one([0.0, h + r, 0.0], [0.0, 0.0, 0.0], r), 10.0, [10.0])
-    ev = run.events[0]
+    ev = run.events.of_sphere(0)
     t0 = np.sqrt(2 * h / G)
     bounces = ev.bounces()
     c = np.sqrt(k)
     i = np.arange(len(bounces))
     expected = t0 * (1 + 2 * (c * (1 - c ** i) / (1 - c)))
     np.testing.assert_allclose(bounces.time, expected, rtol=1e-9)
-    assert ev.kind[-1] == reference.SUPPORT
+    assert ev.kind[-1] == ws.ContactKind.SUPPORT
     # the last bounce was the first below the resting speed
     speeds = G * t0 * c ** np.arange(len(bounces) + 1)
     assert speeds[len(bounces)] <= reference.RESTING_SPEED < speeds[len(bounces) - 1]
@@ -340,7 +341,7 @@ def test_slipping_off_a_rounded_edge_leaves_near_the_analytic_angle():
 
 
 def test_bad_input_names_the_field():
-    assert ws.reference is reference  # the package exposes it as ws.reference
+    assert ws.analysis.reference is reference  # the package exposes it as ws.analysis.reference
     scene = floor_scene()
     swarm = one([0, 1, 0], [0, 0, 0])
     with pytest.raises(ValueError, match="t_end"):

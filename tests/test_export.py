@@ -18,7 +18,8 @@ from pxr import Usd, UsdGeom, UsdShade, UsdUtils
 
 import warpsim
 import warpsim.export.files as files_module
-import warpsim.export.usd as usd_module
+import warpsim.export.usd_read as usd_read
+import warpsim.export.usd_write as usd_module
 from warpsim.export import (
     LargeOutputWarning,
     estimate_usd_bytes,
@@ -437,7 +438,16 @@ def test_bad_selection_is_refused(tmp_path):
 
 def test_import_warpsim_does_not_import_pxr():
     code = ("import sys, warpsim; assert 'pxr' not in sys.modules; "
-            "warpsim.export; assert 'pxr' in sys.modules")
+            "warpsim.export.write_usd; assert 'pxr' in sys.modules")
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+
+
+def test_the_file_helpers_do_not_import_pxr():
+    """``warpsim.export.files`` is standard library only: a writer of events or JSON uses it
+    without loading USD."""
+    code = ("import sys; import warpsim.export.files; from warpsim.export import check_writable; "
+            "assert 'pxr' not in sys.modules, 'pxr loaded'; "
+            "assert 'PIL' not in sys.modules, 'Pillow loaded'")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
 
 
@@ -734,7 +744,7 @@ def test_reading_boxes_from_the_layer_equals_composition(tmp_path):
     out = write_usd(tmp_path / "anim.usda", scene, make_trajectory())
 
     def composed(path):
-        return usd_module.boxes_of_stage(Usd.Stage.Open(str(path)), path)
+        return usd_read.boxes_of_stage(Usd.Stage.Open(str(path)), path)
 
     def same(a, b):
         return all(np.array_equal(getattr(a, f), getattr(b, f))

@@ -1,6 +1,6 @@
 """Numbers a precision cannot hold are refused before a run; coarse float32 is warned about.
 
-``validation.check_run`` is checked against numpy doing the same arithmetic in the chosen
+``feasibility.check_run`` is checked against numpy doing the same arithmetic in the chosen
 precision: what it accepts stays finite there, and what it refuses as hopeless far from the
 origin really rounds a frame's motion away. No Warp kernel runs here.
 """
@@ -15,12 +15,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import warpsim as ws
-from warpsim import validation as check
-from warpsim.validation import PrecisionWarning
+from warpsim import feasibility
+from warpsim.feasibility import PrecisionWarning
 
 DT = 1.0 / 60.0
 DTYPE = {"float32": np.float32, "float64": np.float64}
-LIMIT = {p: float(np.finfo(d).max) * check.MAGNITUDE_MARGIN for p, d in DTYPE.items()}
+LIMIT = {p: float(np.finfo(d).max) * feasibility.MAGNITUDE_MARGIN for p, d in DTYPE.items()}
 SQUARE_LIMIT = {p: LIMIT[p] ** 0.5 for p in DTYPE}
 FIX = '; precision="float64" holds it'
 
@@ -38,7 +38,7 @@ def _run(precision="float32", *, dt=DT, max_bounces=8, offset=0.0, velocity=0.0,
                      radius=[0.05, radius, 0.05], mass=[1.0, mass, 1.0],
                      angular_momentum=[[0.0, 0.0, 0.0], [angular_momentum, 0.0, 0.0],
                                        [0.0, 0.0, 0.0]])
-    return check.check_run(scene, swarm, dt, precision, max_bounces)
+    return feasibility.check_run(scene, swarm, dt, precision, max_bounces)
 
 
 def _refused(message: str, **kwargs) -> None:
@@ -59,8 +59,8 @@ def test_every_bundled_scene_passes_silently_in_both_precisions(name, precision)
     swarm = scene.spawn()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert check.check_run(scene, swarm, scene.dt, precision, scene.max_bounces) == []
-    check.check_outside(scene.boxes, swarm.position, swarm.radius, precision)
+        assert feasibility.check_run(scene, swarm, scene.dt, precision, scene.max_bounces) == []
+    feasibility.check_outside(scene.boxes, swarm.position, swarm.radius, precision)
 
 
 # --- too small, too large --------------------------------------------------------------------
@@ -129,8 +129,8 @@ def test_gravity_and_dt_that_cannot_be_held_are_named():
 
 def test_the_run_arguments_are_checked_too():
     for kwargs, message in [
-        (dict(max_bounces=2**32), "max_bounces must be <= 1024 (the cap is compiled into the "
-                                  "kernel's bounce loop), got 4294967296"),
+        (dict(max_bounces=2**32), "max_bounces must be <= 1024 (contacts per sphere per "
+                                  "frame), got 4294967296"),
         (dict(max_bounces=True), "max_bounces must be an integer, got True"),
         (dict(dt="0.1"), "dt must be a number, got '0.1'"),
         (dict(dt=True), "dt must be a number, got True"),
@@ -155,7 +155,7 @@ def test_what_is_accepted_stays_finite_in_the_precision(precision, log_v, log_dt
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", PrecisionWarning)
-            check.check_run(scene, swarm, dt, precision, 8)
+            feasibility.check_run(scene, swarm, dt, precision, 8)
     except ValueError:
         return
     f = DTYPE[precision]

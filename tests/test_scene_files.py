@@ -278,11 +278,10 @@ ERROR_CASES = [
     ("huge frames", "[simulation]\nframes = 4294967296\n" + MINIMAL,
      "simulation.frames must be <= 2147483647 (integers must be below 2**31), got 4294967296"),
     ("max_bounces above the cap", "[simulation]\nmax_bounces = 4294967296\n" + MINIMAL,
-     "simulation.max_bounces must be <= 1024 (the cap is compiled into the kernel's bounce "
-     "loop), got 4294967296"),
+     "simulation.max_bounces must be <= 1024 (contacts per sphere per frame), got 4294967296"),
     ("max_bounces of 2**63 - 1", "[simulation]\nmax_bounces = 9223372036854775807\n" + MINIMAL,
-     "simulation.max_bounces must be <= 1024 (the cap is compiled into the kernel's bounce "
-     "loop), got 9223372036854775807"),
+     "simulation.max_bounces must be <= 1024 (contacts per sphere per frame), got "
+     "9223372036854775807"),
     ("bad retention", "[physics]\nenergy_retention = 1.5\n" + MINIMAL,
      "physics.energy_retention must be <= 1, got 1.5"),
     ("energy_correction not a bool", "[physics]\nenergy_correction = 1\n" + MINIMAL,

@@ -1,4 +1,4 @@
-"""No sphere starts inside an obstacle: ``validation.check_outside`` and the nearest-box query.
+"""No sphere starts inside an obstacle: ``feasibility.check_outside`` and the nearest-box query.
 
 Spheres are built backwards from the contact they should have: a point ``q0`` on the core box
 (a face, an edge or a corner), an outward direction ``u`` whose nearest core point is ``q0``,
@@ -13,8 +13,7 @@ import pytest
 from conftest import shaped_half_extents
 
 import warpsim as ws
-from warpsim import obstacles
-from warpsim import validation as check
+from warpsim import feasibility, obstacles
 from warpsim.obstacles import quat_to_matrix
 
 KINDS = ("box", "plate", "stick", "point", "cube")
@@ -82,9 +81,9 @@ def test_touching_or_a_few_ulps_in_is_legal(precision, kind, feature, offset):
         return np.where(np.arange(n) % 2 == 0, 0.0, 2.0 * ulp)
 
     boxes, position, radius, _ = _scene(rng, kind, feature, n, depth, offset)
-    check.check_outside(boxes, position, radius, precision)
+    feasibility.check_outside(boxes, position, radius, precision)
     # and clear of every box is legal, of course
-    check.check_outside(boxes, position, radius * 0.5, precision)
+    feasibility.check_outside(boxes, position, radius * 0.5, precision)
 
 
 @pytest.mark.parametrize("feature", FEATURES)
@@ -103,7 +102,7 @@ def test_inside_is_refused_naming_sphere_box_and_depth(precision, kind, feature)
     i = inside[0]
     p = position[i]
     with pytest.raises(ValueError) as info:
-        check.check_outside(boxes, position, radius, precision)
+        feasibility.check_outside(boxes, position, radius, precision)
     assert str(info.value) == (
         f"sphere {i} starts {depth[i]:.3g} m inside box {i} (position ({p[0]:g}, {p[1]:g}, "
         f"{p[2]:g}), radius {radius[i]:g}): spheres must start outside the obstacles or "
@@ -116,14 +115,14 @@ def test_tolerance_scales_with_the_precision_and_the_coordinates():
     # four float32 ulps in at 1e4 m: rounding for float32 kernels, a real overlap in float64
     depth = np.full(20, 4.0 * EPS["float32"] * offset)
     boxes, position, radius, _ = _scene(rng, "box", "face", 20, depth, offset)
-    check.check_outside(boxes, position, radius, "float32")
+    feasibility.check_outside(boxes, position, radius, "float32")
     with pytest.raises(ValueError, match=r"^sphere 0 starts 0.00477 m inside box 0 "):
-        check.check_outside(boxes, position, radius, "float64")
+        feasibility.check_outside(boxes, position, radius, "float64")
     # the same depth near the origin is refused in both
     boxes, position, radius, _ = _scene(rng, "box", "face", 20, depth, 0.0)
     for precision in ("float32", "float64"):
         with pytest.raises(ValueError, match=r"^sphere 0 starts 0.00477 m inside box 0 "):
-            check.check_outside(boxes, position, radius, precision)
+            feasibility.check_outside(boxes, position, radius, precision)
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -133,25 +132,25 @@ def test_a_sphere_at_a_box_centre_is_as_deep_as_the_box_is_thin(kind):
     box = ws.RoundedBoxes(center=[[1.0, 2.0, 3.0]], half_extents=[h],
                           rotation=_unit_quaternions(rng, 1), radius=[0.1])
     with pytest.raises(ValueError) as info:
-        check.check_outside(box, [[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]], [0.0, 0.05], "float32")
+        feasibility.check_outside(box, [[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]], [0.0, 0.05], "float32")
     assert str(info.value).startswith(f"sphere 1 starts {h.min() + 0.15:.3g} m inside box 0 ")
 
 
 def test_points_on_a_surface_are_legal_and_just_inside_are_not():
     plate = ws.RoundedBoxes(center=[[0.0, 0.0, 0.0]], half_extents=[[0.0, 1.0, 1.0]])
-    check.check_outside(plate, [[0.0, 0.5, 0.5], [1e-3, 0.0, 0.0]], 0.0, "float64")
+    feasibility.check_outside(plate, [[0.0, 0.5, 0.5], [1e-3, 0.0, 0.0]], 0.0, "float64")
     cube = ws.RoundedBoxes(center=[[0.0, 0.0, 0.0]], half_extents=[[1.0, 1.0, 1.0]])
-    check.check_outside(cube, [[1.0, 0.0, 0.0], [1.0, 1.0, 1.0]], 0.0, "float64")
+    feasibility.check_outside(cube, [[1.0, 0.0, 0.0], [1.0, 1.0, 1.0]], 0.0, "float64")
     with pytest.raises(ValueError, match=r"^sphere 1 starts 0.001 m inside box 0 "):
-        check.check_outside(cube, [[1.0, 0.0, 0.0], [0.999, 0.0, 0.0]], 0.0, "float64")
+        feasibility.check_outside(cube, [[1.0, 0.0, 0.0], [0.999, 0.0, 0.0]], 0.0, "float64")
 
 
 def test_nothing_to_check_and_the_deepest_box_is_named():
     boxes = ws.RoundedBoxes(center=[[0.0, 0.0, 0.0], [0.5, 0.0, 0.0]],
                             half_extents=[[1.0, 1.0, 1.0], [1.0, 1.0, 1.0]])
-    check.check_outside(boxes, np.zeros((0, 3)), 0.1, "float32")
+    feasibility.check_outside(boxes, np.zeros((0, 3)), 0.1, "float32")
     with pytest.raises(ValueError, match=r"^sphere 0 starts 1 m inside box 1 "):
-        check.check_outside(boxes, [[0.6, 0.0, 0.0]], 0.1, "float32")
+        feasibility.check_outside(boxes, [[0.6, 0.0, 0.0]], 0.1, "float32")
 
 
 # --- the nearest-box query ---------------------------------------------------------------------
@@ -215,9 +214,9 @@ def test_a_million_spheres_among_ten_thousand_boxes_in_bounded_memory():
     np.testing.assert_array_equal(distance[sample], expected_distance)
     np.testing.assert_array_equal(index[sample], expected_index)
     clear = ~(distance - radius < 0.0)  # float64's tolerance (1e-13 m here) never matters
-    check.check_outside(boxes, position[clear], radius, "float64")
+    feasibility.check_outside(boxes, position[clear], radius, "float64")
     first = int(np.flatnonzero(~clear)[0])
     with pytest.raises(ValueError, match=rf"^sphere {first} starts .* inside box "
                                          rf"{index[first]} .*; {int((~clear).sum())} of "
                                          rf"{n} spheres start inside$"):
-        check.check_outside(boxes, position, radius, "float64")
+        feasibility.check_outside(boxes, position, radius, "float64")

@@ -126,8 +126,7 @@ INTEGER_FIELDS = {
 
 def _integer_limit_message(field: str, value: int) -> str:
     if field == "max_bounces":
-        return (f"max_bounces must be <= 1024 (the cap is compiled into the kernel's bounce "
-                f"loop), got {value}")
+        return f"max_bounces must be <= 1024 (contacts per sphere per frame), got {value}"
     return f"{field} must be <= 2147483647 (integers must be below 2**31), got {value}"
 
 

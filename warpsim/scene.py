@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 
+from . import feasibility
 from . import validation as check
 from .obstacles import RoundedBoxes
 from .scene_files import SceneFileError, read_scene_file
@@ -97,7 +98,7 @@ class Scene:
 
         Returns:
             A :class:`warpsim.Swarm`; the same ``seed`` gives the same swarm. No sphere starts
-            inside an obstacle (checked with ``warpsim.validation.check_outside``).
+            inside an obstacle (checked with ``warpsim.feasibility.check_outside``).
 
         Raises:
             ValueError: when the scene has no emitter, for a bad ``n`` or ``seed``, or when the
@@ -112,7 +113,7 @@ class Scene:
             check.positive_int("seed", seed, minimum=0)
         try:
             swarm = self.emitter.spawn(self.boxes, n=n, seed=seed)
-            check.check_outside(self.boxes, swarm.position, swarm.radius, "float64")
+            feasibility.check_outside(self.boxes, swarm.position, swarm.radius, "float64")
         except ValueError as exc:
             if self.source is None:
                 raise

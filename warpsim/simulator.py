@@ -12,6 +12,7 @@ import numpy as np
 import warp as wp
 
 from . import broad_phase as broad
+from . import feasibility
 from . import validation as check
 from .device import resolve_device
 from .kernels import precision as fp
@@ -148,10 +149,10 @@ class Simulator:
                                   else check.flag("energy_correction", energy_correction))
         """Whether the speed is reset from the energy after each frame."""
         # everything a run needs, checked before anything is uploaded or compiled
-        self.warnings = check.check_run(scene, swarm, self.dt, self.precision,
+        self.warnings = feasibility.check_run(scene, swarm, self.dt, self.precision,
                                         self.max_bounces)
-        """Texts of the :class:`warpsim.validation.PrecisionWarning` s this set-up raised."""
-        check.check_outside(scene.boxes, swarm.position, swarm.radius, self.precision)
+        """Texts of the :class:`warpsim.PrecisionWarning` s this set-up raised."""
+        feasibility.check_outside(scene.boxes, swarm.position, swarm.radius, self.precision)
         reach = broad.reach(swarm.position, swarm.velocity, swarm.radius, scene.gravity, self.dt)
         dtype = fp.precision(self.precision).np_dtype
         self.broad_phase, self._grid = broad.choose(broad_phase, scene.boxes, reach, dtype)
@@ -318,7 +319,7 @@ class Simulator:
                 [rad/s] at the recorded frames (``Trajectory.velocity`` and
                 ``angular_velocity``).
             events: also record every contact (``Trajectory.events``, a
-                :class:`warpsim.events.ContactEvents`), written by the kernel into a bounded
+                :class:`warpsim.ContactEvents`), written by the kernel into a bounded
                 buffer per shard and copied out after each launch. The results are the same
                 bits with or without.
             event_capacity: rows of that buffer per shard and launch; contacts beyond it are
@@ -384,7 +385,7 @@ class Simulator:
                           dt=self.dt, position=position, orientation=orientation,
                           radius=self._radius_host.copy(), velocity=velocity,
                           angular_velocity=angular,
-                          events=_contact_events(gathered, dropped) if events else None)
+                          events=_contact_events(gathered, dropped, self.dt) if events else None)
 
     def _motion_now(self) -> tuple[np.ndarray, np.ndarray]:
         """True velocity [m/s] and world angular velocity [rad/s] of the current state."""
@@ -480,13 +481,13 @@ def _read_events(buffer, frame_base: int) -> tuple[dict, int]:
     vector = buffer.vector.numpy()[:rows].astype(np.float64)
     scalar = buffer.value.numpy()[:rows].astype(np.float64)
     columns = {"frame": index[:, 0] + frame_base, "sphere": index[:, 1], "box": index[:, 2],
-               "resting": index[:, 3] != 0, "position": vector[:, 0], "normal": vector[:, 1],
+               "kind": index[:, 3], "position": vector[:, 0], "normal": vector[:, 1],
                "fraction": scalar[:, 0], "normal_speed": scalar[:, 1]}
     return columns, count - rows
 
 
-def _contact_events(parts: list[dict], dropped: int):
-    """One :class:`warpsim.events.ContactEvents` from the launches' rows, ordered by frame, then
+def _contact_events(parts: list[dict], dropped: int, dt: float):
+    """One :class:`warpsim.ContactEvents` from the launches' rows, ordered by frame, then
     sphere, then the order the contacts happened in (a stable sort keeps it: one thread writes a
     sphere's contacts in sequence)."""
     from .events import ContactEvents
@@ -497,7 +498,7 @@ def _contact_events(parts: list[dict], dropped: int):
     order = np.lexsort((merged["sphere"], merged["frame"]))
     merged = {key: value[order] for key, value in merged.items()}
     merged["box"] = merged["box"].astype(np.int32)
-    return ContactEvents(dropped=dropped, **merged)
+    return ContactEvents.of_frames(dt, dropped=dropped, **merged)
 
 
 def _workers(workers, device, n: int) -> int:

@@ -23,7 +23,7 @@ class Trajectory:
             recorded (``Simulator.run(..., velocities=True)`` records it).
         angular_velocity: world-frame angular velocity at each recorded frame [rad/s], shape
             (F, N, 3), or None when not recorded.
-        events: the contacts of the run (:class:`warpsim.events.ContactEvents`), or None when
+        events: the contacts of the run (:class:`warpsim.ContactEvents`), or None when
             not recorded (``Simulator.run(..., events=True)``).
     """
 

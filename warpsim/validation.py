@@ -1,4 +1,4 @@
-"""Every check of warpsim's inputs, in one place: types, shapes, bounds and what a precision holds.
+"""Every check of warpsim's input fields, in one place: types, shapes and bounds.
 
 The classes (:class:`warpsim.Scene`, :class:`warpsim.Swarm`, :class:`warpsim.RoundedBox`,
 :class:`warpsim.RoundedBoxes`, :class:`warpsim.Emitter`), the scene files and the simulator all
@@ -13,26 +13,27 @@ Numbers must be numbers: strings, booleans and None are refused where a number i
 (numpy alone would read ``True`` as 1, ``"0.1"`` as 0.1 and ``None`` as nan). Integers (counts,
 frames, seeds, the bounce cap) must be below ``2**31``: the kernels count in 32-bit integers.
 
-Two checks look at a whole run rather than one field: :func:`check_run` (every number against
-what the chosen precision can hold; :class:`PrecisionWarning` where float32 loses too much) and
-:func:`check_outside` (no sphere may start inside an obstacle).
+The checks of a whole run rather than one field (what the chosen precision holds, no sphere
+inside an obstacle) are :mod:`warpsim.feasibility`.
 
-This module imports nothing else from warpsim: every other module may import it.
+This module imports nothing else from warpsim but its vocabulary: every other module may
+import it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import numbers
-import warnings
 from collections.abc import Mapping, Sequence
+from enum import StrEnum
 
 import numpy as np
 
+from .vocabulary import BroadPhase, Motion
+
 PRECISIONS = ("float32", "float64")
-BROAD_PHASES = ("auto", "bvh", "brute", "grid")
-MOTIONS = ("linear", "ballistic")
 DTYPES = {"float32": np.float32, "float64": np.float64}
 
 INT_LIMIT = 2**31
@@ -40,9 +41,9 @@ INT_LIMIT = 2**31
 a larger value would wrap around silently (``2**32`` bounces would become 0)."""
 
 MAX_BOUNCES = 1024
-"""Largest ``max_bounces`` accepted. The cap is compiled into the kernel's bounce loop; a sphere
-wedged in a corner takes a few contacts per frame, and a cap this high already means a sphere
-may spend a thousand sweeps over the obstacles in one frame."""
+"""Largest ``max_bounces`` accepted. The cap is a launch value of the bounce loop (one compiled
+kernel serves every cap); a sphere wedged in a corner takes a few contacts per frame, and a cap
+this high already means a sphere may spend a thousand sweeps over the obstacles in one frame."""
 
 QUAT_MIN_NORM = 1e-12
 """A quaternion shorter than this has no reliable direction to normalise (its components are
@@ -51,32 +52,6 @@ rounding noise): refused as a zero quaternion."""
 UNIT_SLACK = 4.0 * np.finfo(np.float64).eps
 """Quaternions whose length is within this of 1 are kept bit for bit, so validating an already
 validated quaternion (a box taken out of a group and put back) changes nothing."""
-
-MAGNITUDE_MARGIN = 1e-8
-"""Largest magnitude of a stored number, as a fraction of the precision's largest finite value
-(float32: 3.4e30, float64: 1.8e300): the kernels add and multiply a few such values (a dot
-product, ``m g h``, ``m |v|^2``), which must stay finite."""
-
-START_INSIDE_ULPS = 16.0
-"""A sphere may start this many ulps of its coordinates inside an obstacle (and is then taken as
-in contact): a sphere put exactly on a surface sits a few ulps off it once its position and the
-box are rounded to the kernels' precision (the kernels' resting gap uses the same count)."""
-
-MOTION_RESOLUTION = 1e-2
-"""Warn when the precision's spacing at the scene's coordinates exceeds this fraction of a
-frame's motion: each frame's move is then rounded by more than 1 %."""
-
-RADIUS_RESOLUTION = 1e-2
-"""Warn when the precision's spacing at the scene's coordinates exceeds this fraction of the
-smallest non-zero sphere radius: contacts are then placed to worse than 1 % of a radius."""
-
-MOTION_HOPELESS = 2.0
-"""Refuse when the spacing is at least this many times a frame's largest motion: a move below
-half the spacing rounds away entirely, so every sphere would freeze."""
-
-
-class PrecisionWarning(UserWarning):
-    """The chosen precision represents the run's numbers, but coarsely (see :func:`check_run`)."""
 
 
 # --- numbers ---------------------------------------------------------------------------------
@@ -87,7 +62,7 @@ def _short(value, limit: int = 60) -> str:
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
-def _fmt(row) -> str:
+def format_row(row) -> str:
     row = np.asarray(row)
     if row.ndim == 0:
         return f"{float(row):g}"
@@ -168,7 +143,7 @@ def _as_float_array(name: str, value) -> np.ndarray:
                          f"{_short(value)}") from exc
 
 
-def _first_bad_row(mask: np.ndarray) -> int:
+def first_bad_row(mask: np.ndarray) -> int:
     """Index of the first True entry of a 1-D mask (``mask.any()`` must hold)."""
     return int(np.flatnonzero(mask)[0])
 
@@ -178,8 +153,8 @@ def _check_finite_rows(name: str, arr: np.ndarray) -> None:
     if bad.ndim > 1:
         bad = bad.reshape(bad.shape[0], -1).any(axis=1) if bad.size else np.zeros(0, bool)
     if bad.any():
-        i = _first_bad_row(bad)
-        raise ValueError(f"{name}[{i}] must be finite, got {_fmt(arr[i])}")
+        i = first_bad_row(bad)
+        raise ValueError(f"{name}[{i}] must be finite, got {format_row(arr[i])}")
 
 
 def scalar(name: str, value, *, minimum: float | None = None, positive: bool = False,
@@ -223,7 +198,7 @@ def per_item(name: str, value, count: int, *, positive: bool = False,
          f"must be >= {minimum:g}" if minimum is not None else ""),
     ):
         if bad is not None and bad.any():
-            i = _first_bad_row(bad)
+            i = first_bad_row(bad)
             where = label if label is not None else f"{name}[{i}]"
             raise ValueError(f"{where} {what}, got {arr[i]:g}")
     return arr
@@ -272,7 +247,7 @@ def vec3(name: str, value) -> np.ndarray:
     if arr.shape != (3,):
         raise ValueError(f"{name} must be a 3-vector, got shape {arr.shape}")
     if not np.isfinite(arr).all():
-        raise ValueError(f"{name} must be finite, got {_fmt(arr)}")
+        raise ValueError(f"{name} must be finite, got {format_row(arr)}")
     return arr
 
 
@@ -281,7 +256,7 @@ def nonnegative_vec3(name: str, value) -> np.ndarray:
     arr = vec3(name, value)
     bad = arr < 0.0
     if bad.any():
-        j = _first_bad_row(bad)
+        j = first_bad_row(bad)
         raise ValueError(f"{name}[{j}] must be >= 0, got {arr[j]:g}")
     return arr
 
@@ -291,8 +266,8 @@ def nonnegative_vec3_array(name: str, value, count: int | None = None) -> np.nda
     arr = vec3_array(name, value, count)
     bad = (arr < 0.0).any(axis=1)
     if bad.any():
-        i = _first_bad_row(bad)
-        raise ValueError(f"{name}[{i}] must be >= 0 in every component, got {_fmt(arr[i])}")
+        i = first_bad_row(bad)
+        raise ValueError(f"{name}[{i}] must be >= 0 in every component, got {format_row(arr[i])}")
     return arr
 
 
@@ -311,8 +286,8 @@ def unit_quat_array(name: str, value, count: int) -> np.ndarray:
     norm = np.linalg.norm(arr, axis=1)
     bad = ~(norm > QUAT_MIN_NORM)
     if bad.any():
-        i = _first_bad_row(bad)
-        raise ValueError(f"{name}[{i}] must be a non-zero quaternion, got {_fmt(arr[i])}")
+        i = first_bad_row(bad)
+        raise ValueError(f"{name}[{i}] must be a non-zero quaternion, got {format_row(arr[i])}")
     return _normalised(arr, norm[:, None])
 
 
@@ -324,7 +299,7 @@ def unit_quat(name: str, value) -> np.ndarray:
     norm = np.linalg.norm(arr)
     if not np.isfinite(arr).all() or not norm > QUAT_MIN_NORM:
         raise ValueError(f"{name} must be a finite non-zero quaternion (x, y, z, w), got "
-                         f"{_fmt(arr)}")
+                         f"{format_row(arr)}")
     return _normalised(arr, norm)
 
 
@@ -350,7 +325,7 @@ def positive_int(name: str, value, *, minimum: int = 1, maximum: int = INT_LIMIT
 def bounce_cap(value, name: str = "max_bounces") -> int:
     """The bounce cap: an integer in ``[1, MAX_BOUNCES]``."""
     return positive_int(name, value, maximum=MAX_BOUNCES,
-                        reason="the cap is compiled into the kernel's bounce loop")
+                        reason="contacts per sphere per frame")
 
 
 def flag(name: str, value) -> bool:
@@ -368,7 +343,7 @@ def index_list(name: str, value: Sequence[int] | np.ndarray, count: int) -> np.n
     arr = np.array(arr, dtype=np.int64, copy=True).reshape(-1)
     bad = (arr < 0) | (arr >= count)
     if bad.any():
-        i = _first_bad_row(bad)
+        i = first_bad_row(bad)
         raise ValueError(f"{name}[{i}] = {arr[i]} is out of range [0, {count})")
     if len(np.unique(arr)) != len(arr):
         raise ValueError(f"{name} must not repeat an index")
@@ -393,11 +368,19 @@ def float_dtype(name: str) -> np.dtype:
     return np.dtype(DTYPES[precision(name)])
 
 
-def motion(value: str, name: str = "motion") -> str:
-    """``"linear"`` (the sheet's chord per frame) or ``"ballistic"`` (the exact parabola)."""
-    if not isinstance(value, str) or value not in MOTIONS:
-        raise ValueError(f"{name} must be one of {MOTIONS}, got {_short(value)}")
-    return value
+def _member(enum: type[StrEnum], name: str, value) -> StrEnum:
+    """The member of a string enum named by ``value`` (a member or its string value)."""
+    if isinstance(value, str):
+        with contextlib.suppress(ValueError):
+            return enum(value)
+    choices = tuple(m.value for m in enum)
+    raise ValueError(f"{name} must be one of {choices}, got {_short(value)}")
+
+
+def motion(value, name: str = "motion") -> Motion:
+    """A :class:`~warpsim.vocabulary.Motion`: ``"linear"`` (the chord of each frame) or
+    ``"ballistic"`` (the exact parabola)."""
+    return _member(Motion, name, value)
 
 
 def optional_flag(name: str, value) -> bool | None:
@@ -405,11 +388,10 @@ def optional_flag(name: str, value) -> bool | None:
     return None if value is None else flag(name, value)
 
 
-def broad_phase(value: str) -> str:
-    """``"auto"``, ``"bvh"``, ``"brute"`` or ``"grid"``."""
-    if not isinstance(value, str) or value not in BROAD_PHASES:
-        raise ValueError(f"broad_phase must be one of {BROAD_PHASES}, got {_short(value)}")
-    return value
+def broad_phase(value) -> BroadPhase:
+    """A :class:`~warpsim.vocabulary.BroadPhase`: ``"auto"``, ``"brute"``, ``"bvh"`` or
+    ``"grid"`` (booleans and other types refused)."""
+    return _member(BroadPhase, "broad_phase", value)
 
 
 # --- the fields of the classes, shared with the scene files ----------------------------------
@@ -493,7 +475,7 @@ def emitter_fields(values: Mapping[str, object], where: str = "") -> dict[str, o
                          else values["direction"])
         if not np.linalg.norm(direction) > 0.0:
             raise ValueError(f"{name('direction')} must be a non-zero vector, got "
-                             f"{_fmt(direction)}")
+                             f"{format_row(direction)}")
         direction = _tuple3(direction)
         cone = scalar(name("cone_deg"), 180.0 if values["cone_deg"] is None
                       else values["cone_deg"], minimum=0.0, maximum=180.0)
@@ -533,206 +515,3 @@ def sphere_batch(position, velocity, radius, boxes):
     n = pos.shape[0]
     return (as_boxes(), pos, vec3_array("velocity", velocity, n),
             per_item("radius", radius, n, minimum=0.0))
-
-
-# --- a whole run against its precision -------------------------------------------------------
-
-
-def _limits(dtype: np.dtype) -> tuple[float, float]:
-    """``(largest magnitude, largest magnitude of a squared quantity)`` stored in ``dtype``."""
-    limit = float(np.finfo(dtype).max) * MAGNITUDE_MARGIN
-    return limit, math.sqrt(limit)
-
-
-def _fits_float64(value: float, squared: bool) -> str:
-    limit, square_limit = _limits(np.dtype(np.float64))
-    return '; precision="float64" holds it' if value <= (square_limit if squared
-                                                             else limit) else ""
-
-
-def _refuse_large(field: str, magnitude, rows, quantity: str, unit: str, dtype: np.dtype,
-                  squared: bool) -> None:
-    """Raise when a magnitude exceeds the precision's limit (``squared``: its square must fit).
-
-    Args:
-        field: the field's name; with ``rows`` (the field's value per index) the message names
-            the first bad index and shows its row.
-        magnitude: the checked quantity, a scalar or one per row. quantity: how it is computed.
-    """
-    limit, square_limit = _limits(dtype)
-    bound = square_limit if squared else limit
-    magnitude = np.atleast_1d(np.asarray(magnitude, dtype=np.float64))
-    bad = ~(magnitude <= bound)
-    if not bad.any():
-        return
-    i = _first_bad_row(bad)
-    shown = f"[{i}] = {_fmt(rows[i])}" if rows is not None else ""
-    why = "its square must stay finite" if squared else "sums and products must stay finite"
-    hint = "" if dtype == np.float64 else _fits_float64(float(magnitude[i]), squared)
-    raise ValueError(f"{field}{shown} is too large for {dtype.name}: {quantity} = "
-                     f"{magnitude[i]:.3g} {unit}, above {bound:.3g} ({why}){hint}")
-
-
-def _norms(rows: np.ndarray) -> np.ndarray:
-    """Euclidean norms of ``(N, 3)`` rows without overflow in the squares (float64 holds
-    ``|v| = 1e200``, not ``|v|^2``)."""
-    scale = np.abs(rows).max(axis=1, initial=0.0)
-    safe = np.where(scale > 0.0, scale, 1.0)
-    return scale * np.linalg.norm(rows / safe[:, None], axis=1)
-
-
-def _share(ratio: float) -> str:
-    """``"4.5 % of"`` or ``"380 times"``: how a ratio reads in a message."""
-    return f"{100.0 * ratio:.2g} % of" if ratio < 1.0 else f"{ratio:.2g} times"
-
-
-def scene_extent(boxes, position) -> float:
-    """Largest coordinate magnitude [m] of the scene: the spheres' centres and the boxes'
-    world bounds (0 for an empty scene)."""
-    reach = [0.0]
-    if len(position):
-        reach.append(float(np.abs(position).max()))
-    if len(boxes):
-        reach.append(float((np.abs(boxes.center) + boxes.world_extent()).max()))
-    return max(reach)
-
-
-def check_run(scene, swarm, dt, precision, max_bounces) -> list[str]:
-    """Check once, before anything is uploaded, that a run's numbers fit its precision.
-
-    Every number is checked against what ``precision`` can hold, with margin (see
-    :data:`MAGNITUDE_MARGIN`): ``dt`` must not underflow; gravity, ``|g| dt`` (a frame's velocity
-    kick), ``|g| dt^2``, the speeds, ``|v| dt`` (a frame's path), the positions, the spheres'
-    radii and kinetic energies, and the boxes' world bounds must stay finite, the squared ones
-    too. Then float32's coarseness far from the origin: where the spacing of the numbers at the
-    scene's coordinates (:func:`scene_extent`) is at least :data:`MOTION_HOPELESS` times a
-    frame's largest motion (the larger of ``|g| dt^2`` and the largest ``|v| dt``) every sphere
-    would freeze: refused; above :data:`MOTION_RESOLUTION` of that motion or
-    :data:`RADIUS_RESOLUTION` of the smallest non-zero radius: a :class:`PrecisionWarning`.
-
-    Args:
-        scene: a :class:`warpsim.Scene` (its gravity, friction, angular speed cap and boxes).
-        swarm: a :class:`warpsim.Swarm`.
-        dt: time step [s]. precision: ``"float32"`` or ``"float64"``. max_bounces: the cap.
-
-    Returns:
-        The texts of the warnings given (each also issued with ``warnings.warn``).
-
-    Raises:
-        ValueError: one line naming the field (and the sphere or box index) that does not fit.
-    """
-    dtype = float_dtype(precision)
-    dt = scalar("dt", dt, positive=True)
-    bounce_cap(max_bounces)
-    info = np.finfo(dtype)
-    name = dtype.name
-
-    if not dtype.type(dt) >= info.tiny:
-        hint = "" if dtype == np.float64 else '; precision="float64" holds it'
-        raise ValueError(f"dt = {dt:g} s underflows in {name} (smallest normal "
-                         f"{float(info.tiny):.3g} s){hint}")
-    _refuse_large("dt", dt, None, "dt", "s", dtype, squared=False)
-
-    g = np.asarray(scene.gravity, dtype=np.float64)
-    g_norm = float(_norms(g[None])[0])
-    _refuse_large("gravity", g_norm, None, "|g|", "m/s^2", dtype, squared=False)
-    _refuse_large("gravity", g_norm * dt, None, "|g| dt", "m/s", dtype, squared=True)
-    _refuse_large("gravity", g_norm * dt * dt, None, "|g| dt^2", "m", dtype, squared=True)
-    if g_norm > 0.0 and not dtype.type(g_norm * dt) >= info.tiny:
-        raise ValueError(f"gravity * dt = {g_norm * dt:.3g} m/s underflows in {name}: a frame's "
-                         f"gravity would do nothing")
-    _refuse_large("friction", float(scene.friction), None, "k_f", "kg/s", dtype, squared=False)
-    _refuse_large("max_angular_speed", float(scene.max_angular_speed), None, "|Rot|", "rad/s",
-                  dtype, squared=False)
-
-    position = np.asarray(swarm.position, dtype=np.float64)
-    velocity = np.asarray(swarm.velocity, dtype=np.float64)
-    radius = np.asarray(swarm.radius, dtype=np.float64)
-    mass = np.asarray(swarm.mass, dtype=np.float64)
-    angular = np.asarray(swarm.angular_momentum, dtype=np.float64)
-    speed = _norms(velocity)
-    _refuse_large("position", np.abs(position).max(axis=1, initial=0.0), position,
-                  "largest |coordinate|", "m", dtype, squared=True)
-    _refuse_large("velocity", speed, velocity, "|v|", "m/s", dtype, squared=True)
-    _refuse_large("velocity", speed * dt, velocity, "|v| dt", "m", dtype, squared=True)
-    _refuse_large("radius", radius, radius, "r", "m", dtype, squared=True)
-    _refuse_large("mass", mass, mass, "m", "kg", dtype, squared=False)
-    tiny_mass = ~(mass.astype(dtype) >= info.tiny)
-    if tiny_mass.any():
-        i = _first_bad_row(tiny_mass)
-        raise ValueError(f"mass[{i}] = {mass[i]:g} kg underflows in {name} (smallest normal "
-                         f"{float(info.tiny):.3g} kg)")
-    _refuse_large("velocity", 0.5 * mass * speed * speed, velocity, "1/2 m |v|^2", "J", dtype,
-                  squared=False)
-    _refuse_large("angular_momentum", np.abs(angular).max(axis=1, initial=0.0), angular,
-                  "largest |component|", "kg m^2/s", dtype, squared=False)
-    boxes = scene.boxes
-    if len(boxes):
-        reach = (np.abs(boxes.center) + boxes.world_extent()).max(axis=1)
-        _refuse_large("box", reach, boxes.center, "|center| + size", "m", dtype, squared=True)
-
-    extent = scene_extent(boxes, position)
-    _refuse_large("the potential energy", extent * g_norm * mass.max(initial=0.0), None,
-                  "m |g| |coordinate|", "J", dtype, squared=False)
-    spacing = float(np.spacing(dtype.type(extent)))
-    motion = max(g_norm * dt * dt, float(speed.max(initial=0.0)) * dt)
-    where = (f"{name}'s spacing at the scene's coordinates (up to {extent:.3g} m) is "
-             f"{spacing:.3g} m")
-    fix = ('precision="float64" fixes it' if dtype == np.float32
-           else "move the scene nearer the origin")
-    if motion > 0.0 and spacing >= MOTION_HOPELESS * motion:
-        raise ValueError(f"{where}, at least {MOTION_HOPELESS:g} times a frame's largest motion "
-                         f"({motion:.3g} m): every sphere would freeze; {fix}")
-    texts = []
-    if motion > 0.0 and spacing > MOTION_RESOLUTION * motion:
-        texts.append(f"{where}, {_share(spacing / motion)} a frame's largest motion "
-                     f"({motion:.3g} m): every move is rounded that coarsely; {fix}")
-    nonzero = radius[radius > 0.0]
-    if nonzero.size and spacing > RADIUS_RESOLUTION * nonzero.min():
-        texts.append(f"{where}, {_share(spacing / nonzero.min())} the smallest sphere "
-                     f"radius ({nonzero.min():.3g} m): contacts are placed that coarsely; {fix}")
-    for text in texts:
-        warnings.warn(text, PrecisionWarning, stacklevel=3)
-    return texts
-
-
-def check_outside(boxes, position, radius, precision) -> None:
-    """Refuse spheres that start inside an obstacle.
-
-    A sphere starts inside when the signed distance of its surface to some box,
-    ``boxes.signed_distance(p) - r``, is below minus a rounding tolerance:
-    :data:`START_INSIDE_ULPS` ulps of ``precision`` at the pair's coordinates (the larger of the
-    centre's, the sphere radius, the box centre's and its size). Exactly in contact, or a few ulps
-    in, is legal. Memory stays bounded for any counts (see ``RoundedBoxes.nearest``).
-
-    Args:
-        boxes: a :class:`warpsim.RoundedBoxes`.
-        position: sphere centres [m], (N, 3). radius: scalar or (N,) [m].
-        precision: ``"float32"`` or ``"float64"``, the kernels' precision.
-
-    Raises:
-        ValueError: one line naming the first sphere inside (lowest index), the box it is
-            deepest in, how deep, and how many spheres start inside.
-    """
-    eps = float(np.finfo(float_dtype(precision)).eps)
-    position = np.asarray(position, dtype=np.float64).reshape(-1, 3)
-    radius = np.broadcast_to(np.asarray(radius, dtype=np.float64), position.shape[:1])
-    if len(boxes) == 0 or len(position) == 0:
-        return
-    distance, index = boxes.nearest(position, within=radius)
-    hit = index >= 0
-    k = index[hit]
-    scale = np.maximum.reduce([np.abs(position[hit]).max(axis=1), radius[hit],
-                               np.abs(boxes.center[k]).max(axis=1),
-                               boxes.half_extents[k].max(axis=1) + boxes.radius[k]])
-    depth = radius[hit] - distance[hit]
-    inside = depth > START_INSIDE_ULPS * eps * scale
-    if not inside.any():
-        return
-    first = _first_bad_row(inside)
-    i, box = int(np.flatnonzero(hit)[first]), int(k[first])
-    count = int(inside.sum())
-    also = f"; {count} of {len(position)} spheres start inside" if count > 1 else ""
-    raise ValueError(f"sphere {i} starts {depth[first]:.3g} m inside box {box} (position "
-                     f"{_fmt(position[i])}, radius {radius[i]:g}): spheres must start outside "
-                     f"the obstacles or touching them{also}")

@@ -240,14 +240,14 @@ def energy_drift(work: Workload, position: np.ndarray, velocity: np.ndarray) -> 
 def reference_positions(work: Workload, sample: int, frames: int = ERROR_HORIZON_FRAMES):
     """Exact positions [m] of the first ``sample`` spheres at frames 0..``frames``.
 
-    Uses ``warpsim.reference.simulate`` (float64, event-driven, exact parabolas between
+    Uses ``warpsim.analysis.reference.simulate`` (float64, event-driven, exact parabolas between
     contacts). Returns ``(positions (frames + 1, sample, 3), seconds, None)``, or
     ``(None, 0.0, reason)`` when this warpsim has no reference yet.
     """
     try:
-        from warpsim import reference
+        from warpsim.analysis import reference
     except ImportError as exc:
-        return None, 0.0, f"warpsim.reference is not available ({exc})"
+        return None, 0.0, f"warpsim.analysis.reference is not available ({exc})"
     times = np.arange(frames + 1) * work.dt
     start = time.perf_counter()
     ref = reference.simulate(work.scene(), work.swarm(slice(0, sample)), float(times[-1]), times)

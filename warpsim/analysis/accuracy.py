@@ -1,8 +1,8 @@
 """The speed-against-error study of one scene: ``warpsim accuracy SCENE``.
 
 Every setting simulates the same swarm for the same simulated time and is measured against the
-exact reference (:mod:`warpsim.reference`) with :func:`warpsim.error_report.measure`. The
-settings come in families, one curve each:
+exact reference (:mod:`warpsim.analysis.reference`) with
+:func:`warpsim.analysis.error_report.measure`. The settings come in families, one curve each:
 
 - ``linear float32`` / ``linear float64``: the step ``dt`` from 1/30 s to 1/960 s;
 - ``no correction float32`` / ``no correction float64``: the same without the energy reset;
@@ -163,7 +163,7 @@ def _names(name: str, text: str, allowed) -> tuple[str, ...]:
 
 def _config(args) -> dict:
     """Everything checked before the first simulation: scene, numbers, output, plotting."""
-    from .scene import Scene
+    from ..scene import Scene
 
     base = QUICK if args.quick else FULL
     scene = Scene.load(args.scene)
@@ -229,7 +229,7 @@ def _scene_with(scene, energy_correction: bool):
 
 def _simulator(scene, swarm, s: Setting, device):
     """A simulator for a setting, or None when this simulator has no such motion model."""
-    from .simulator import Simulator
+    from ..simulator import Simulator
 
     kwargs = dict(dt=s.dt, max_bounces=s.max_bounces, device=device, precision=s.precision)
     if s.motion != "linear":
@@ -310,8 +310,8 @@ def _run(config: dict) -> int:
         "command": "warpsim accuracy " + " ".join(config.get("argv", [])),
         "reference": {"seconds": ref_seconds, "runs": len(references),
                       "incomplete": int(sum(r.incomplete.sum() for r in references.values())),
-                      "bounces": int(sum(len(e.bounces()) for r in references.values()
-                                         for e in r.events))},
+                      "bounces": int(sum(len(r.events.bounces())
+                                         for r in references.values()))},
         "families": families, "settings": rows, "notes": notes,
         "seconds": time.perf_counter() - started}
     out = config["out"]

@@ -10,12 +10,14 @@ paths can be written, the optional packages are there, the file will not be too 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import inspect
 import os
 import sys
 
 import numpy as np
+
+from ..validation import PRECISIONS
+from ..vocabulary import BroadPhase, Motion
+from .startup import check_device, init_warp
 
 EXIT_ERROR = 1
 EXIT_USAGE = 2
@@ -56,7 +58,7 @@ def sphere_selection(text: str, count: int) -> np.ndarray:
     Raises:
         ValueError: a malformed selection, or indices out of ``range(count)``, naming them.
     """
-    from . import validation as check
+    from .. import validation as check
 
     text = text.strip()
     try:
@@ -79,7 +81,7 @@ def sphere_selection(text: str, count: int) -> np.ndarray:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from . import __version__
+    from .. import __version__
 
     parser = _Parser(prog="warpsim", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"warpsim {__version__}")
@@ -100,10 +102,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=int, help="emitter seed (default: the scene's)")
     run.add_argument("--max-bounces", type=int, help="contacts per sphere per frame")
     run.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's)")
-    run.add_argument("--precision", default="float32", choices=("float32", "float64"))
-    run.add_argument("--broad-phase", default="auto", choices=("auto", "bvh", "brute"),
-                     help="candidate boxes per sphere: a BVH or all boxes (same results)")
-    run.add_argument("--motion", choices=("linear", "ballistic"),
+    run.add_argument("--precision", default="float32", choices=PRECISIONS)
+    run.add_argument("--broad-phase", default=BroadPhase.AUTO, choices=tuple(BroadPhase),
+                     help="candidate boxes per sphere: every box, a BVH or a grid, or chosen "
+                          "from a cost model (same results)")
+    run.add_argument("--motion", choices=tuple(Motion),
                      help="path within a frame: the chord or the exact parabola")
     run.add_argument("--workers", type=int, help="CPU threads stepping the swarm")
     run.add_argument("-o", "--output", help="output .usdc or .usda (default: SCENE.usdc)")
@@ -153,58 +156,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-@contextlib.contextmanager
-def _quiet_stderr(enabled: bool):
-    """Send file descriptor 2 to the null device: Warp's native code prints its start-up
-    warnings (no CUDA driver, say) with C ``fprintf``, which Python cannot intercept."""
-    if not enabled:
-        yield
-        return
-    sys.stderr.flush()
-    saved = os.dup(2)
-    null = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(null, 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(null)
-
-
-def init_warp(debug: bool) -> None:
-    """Initialise Warp, silently unless ``debug`` (then with its messages and build lines)."""
-    import warp as wp
-
-    import warpsim  # noqa: F401  (sets Warp's log level)
-
-    if debug:
-        wp.config.log_level = wp.LOG_INFO
-    with _quiet_stderr(not debug):
-        wp.init()
-
-
-def check_device(name: str | None, debug: bool) -> None:
-    """Refuse an unavailable Warp device in one line, before anything is built (Warp's native
-    code prints its own CUDA errors while it looks for the device: silenced unless ``debug``).
-
-    Raises:
-        ValueError: naming the device.
-    """
-    if name is None:
-        return
-    import warp as wp
-
-    try:
-        with _quiet_stderr(not debug):
-            wp.get_device(name)
-    except Exception as exc:  # Warp raises RuntimeError or ValueError, with several lines
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ValueError(f"device {name!r} is not available: {first}") from None
-
-
 def _cmd_scenes(_args) -> int:
-    from .scene_files import list_scenes
+    from ..scene_files import list_scenes
 
     scenes = list_scenes()
     width = max(len(name) for name, _ in scenes)
@@ -245,60 +198,32 @@ def energy_line(sim, state) -> str:
     return f"energy drift: {drift:.2e} (largest per sphere, relative)"
 
 
-def _accepts(function, name: str) -> bool:
-    try:
-        return name in inspect.signature(function).parameters
-    except (TypeError, ValueError):
-        return False
-
-
 def _run_options(args) -> dict:
-    """Keywords of ``Simulator.run`` asked for on the command line, checked to be supported by
-    this simulator before anything runs."""
-    import warpsim as ws
+    """Keywords of :meth:`warpsim.Simulator.run` asked for on the command line, checked before
+    anything runs."""
+    from .. import validation as check
 
     options = {}
     if args.velocities:
-        if not _accepts(ws.Simulator.run, "velocities"):
-            raise ValueError("--velocities: this simulator does not record velocities yet")
         options["velocities"] = True
     if args.events is not None:
-        if not _accepts(ws.Simulator.run, "events"):
-            raise ValueError("--events: this simulator does not record contact events yet")
         options["events"] = True
     if args.events_capacity is not None:
-        from . import validation as check
-
         if args.events is None:
             raise ValueError("--events-capacity needs --events")
-        check.positive_int("events_capacity", args.events_capacity)
-        name = next((k for k in ("event_capacity", "events_capacity")
-                     if _accepts(ws.Simulator.run, k)), None)
-        if name is None:
-            raise ValueError("--events-capacity: this simulator has no event capacity option")
-        options[name] = args.events_capacity
+        options["event_capacity"] = check.positive_int("events_capacity", args.events_capacity)
     return options
 
 
 def _simulator_options(args) -> dict:
-    """``motion`` and ``workers`` for :class:`warpsim.Simulator`, only when given (checked to
-    be supported before anything runs)."""
-    import warpsim as ws
-
-    options = {}
-    for name in ("motion", "workers"):
-        value = getattr(args, name)
-        if value is None:
-            continue
-        if not _accepts(ws.Simulator.__init__, name):
-            raise ValueError(f"--{name}: this simulator has no {name} option yet")
-        options[name] = value
-    return options
+    """``motion`` and ``workers`` for :class:`warpsim.Simulator`, only when given."""
+    return {name: getattr(args, name) for name in ("motion", "workers")
+            if getattr(args, name) is not None}
 
 
 def _frame_range(args, scene_frames: int) -> tuple[int, int]:
     """``(start, end)``: frames written, the run stopping at ``end``."""
-    from . import validation as check
+    from .. import validation as check
 
     frames = check.positive_int("frames", scene_frames if args.frames is None else args.frames)
     end = frames if args.end is None else check.positive_int("end", args.end)
@@ -310,17 +235,57 @@ def _frame_range(args, scene_frames: int) -> tuple[int, int]:
     return start, end
 
 
+def _run_sharded(args, scene):
+    """``warpsim run SCENE --dask [ADDRESS] [--shards N] [--block B]``:
+    :func:`warpsim.distributed.run` from the command line's options (``--shards`` or
+    ``--block`` without ``--dask`` shard in this process). ``--workers`` is the threads of each
+    shard's simulator.
+
+    Raises:
+        ValueError: an option a sharded run does not support, or a bad value (named).
+    """
+    from .. import distributed
+
+    for option, value in (("--spheres", args.spheres), ("--events", args.events),
+                          ("--events-capacity", args.events_capacity),
+                          ("--error-sample", args.error_sample)):
+        if value is not None:
+            raise ValueError(f"{option} is not supported with --dask/--shards (a sharded run "
+                             f"writes every sphere, one layer per shard)")
+    if args.frames is not None and args.end is not None and args.end > args.frames:
+        raise ValueError(f"--end {args.end} is past --frames {args.frames}")
+    end = args.end if args.end is not None else args.frames
+    if args.output is not None and not args.output.strip():
+        raise ValueError("output path (-o) is empty")
+    output = args.output if args.output is not None else f"{scene.name}.usdc"
+    client = args.dask
+    if client not in (None, distributed.LOCAL):
+        client = distributed.scheduler_address(client)
+    where = ("this process" if client is None
+             else "a local Dask cluster" if client == distributed.LOCAL
+             else f"the Dask scheduler at {client}")
+    n = scene.emitter.count if args.count is None and scene.emitter is not None else args.count
+    print(f"{scene.name}: {n} spheres, {len(scene.boxes)} obstacles, sharded on {where}",
+          file=sys.stderr)
+    block = distributed.DEFAULT_BLOCK if args.block is None else args.block
+    return distributed.run(scene, output, n=args.count, seed=args.seed, frames=end,
+                           start=args.start, every=args.every, client=client,
+                           shards=args.shards, block=block, threads=args.workers, dt=args.dt,
+                           max_bounces=args.max_bounces, device=args.device,
+                           precision=args.precision, broad_phase=args.broad_phase,
+                           velocities=bool(args.velocities), motion=args.motion,
+                           progress=not args.no_progress, max_bytes=args.max_bytes)
+
+
 def _cmd_run(args) -> int:
     import warpsim as ws
 
-    from . import validation as check
-    from .export.files import check_writable
+    from .. import validation as check
+    from ..export.files import check_writable
 
     scene = ws.Scene.load(args.scene)
     if args.dask is not None or args.shards is not None or args.block is not None:
-        from . import distributed  # sharded: the spheres are drawn on the workers
-
-        print(distributed.run_command(args, scene))
+        print(_run_sharded(args, scene))  # sharded: the spheres are drawn on the workers
         return 0
     swarm = scene.spawn(n=args.count, seed=args.seed)
     start, end = _frame_range(args, scene.frames)
@@ -330,7 +295,7 @@ def _cmd_run(args) -> int:
     out = check_writable(args.output if args.output is not None else f"{scene.name}.usdc",
                          USD_SUFFIXES)
     if args.events is not None:
-        from .events import require_parquet
+        from ..events import require_parquet
 
         check_writable(args.events, EVENTS_SUFFIXES, what="events file")
         require_parquet()
@@ -343,7 +308,7 @@ def _cmd_run(args) -> int:
     sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
                        device=args.device, precision=args.precision,
                        broad_phase=args.broad_phase, **extra)
-    from . import export
+    from .. import export
 
     n_written = len(swarm) if subset is None else subset.size
     n_records = len(sorted(set(range(start, end + 1, every)) | {end}))
@@ -381,22 +346,22 @@ def _cmd_run(args) -> int:
                 if events.dropped else "")
         print(f"wrote {events_path} ({len(events):,} contacts{lost})")
     if args.error_sample is not None:
-        from . import reference
+        from ..analysis import error_report
 
-        report = reference.compare(sim, scene, swarm, sample=args.error_sample)
+        report = error_report.compare(sim, scene, swarm, sample=args.error_sample)
         print(report.summary())
     return 0
 
 
 def _cmd_preview(args) -> int:
-    from . import export
+    from .. import export
 
     if (args.output is None) == (args.movie is None):
         raise ValueError("preview needs -o IMAGE or --movie MOVIE (one of them)")
     angles = {"azimuth": args.azimuth, "elevation": args.elevation}
     if args.movie is not None:
-        from .export.files import check_writable
-        from .export.movie import check_movie_support, render_movie
+        from ..export.files import check_writable
+        from ..export.movie import check_movie_support, render_movie
 
         check_movie_support(args.movie)
         check_writable(args.movie, what="movie")
@@ -405,8 +370,8 @@ def _cmd_preview(args) -> int:
         print(f"wrote {path} ({args.size[0]}x{args.size[1]}, one recorded frame in "
               f"{args.every})")
         return 0
-    from .export.files import check_writable
-    from .export.preview import image_format
+    from ..export.files import check_writable
+    from ..export.preview import image_format
 
     image_format(args.output)
     check_writable(args.output, what="image")
@@ -417,25 +382,14 @@ def _cmd_preview(args) -> int:
 
 
 def _cmd_bench(argv: list[str]) -> int:
-    from . import bench as benchmark
+    from . import bench
 
-    if _accepts(benchmark.main, "prog"):
-        return benchmark.main(argv, prog="warpsim bench") or 0
-    saved = sys.argv[0]
-    sys.argv[0] = "warpsim bench"  # argparse's default prog
-    try:
-        return benchmark.main(argv) or 0
-    finally:
-        sys.argv[0] = saved
+    return bench.main(argv) or 0
 
 
 def _cmd_accuracy(argv: list[str]) -> int:
-    try:
-        from . import accuracy
-    except ImportError as exc:
-        if getattr(exc, "name", "") != f"{__package__}.accuracy":
-            raise
-        raise ValueError("the accuracy study is not part of this installation") from None
+    from ..analysis import accuracy
+
     return accuracy.main(argv) or 0
 
 

@@ -1,4 +1,4 @@
-"""The error report: a run measured against the exact reference (:mod:`warpsim.reference`).
+"""The error report: a run measured against the exact reference (:mod:`warpsim.analysis.reference`).
 
 In a room full of plates, trajectories diverge exponentially from any perturbation, so a
 position error after ten seconds says nothing about a simulator. The report gives measures
@@ -47,11 +47,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import validation as check
+from .. import validation as check
+from ..events import ContactEvents
+from ..scene import Scene
+from ..swarm import Swarm
+from ..trajectory import Trajectory
+from ..vocabulary import ContactKind
 from .reference import ReferenceRun, simulate
-from .scene import Scene
-from .swarm import Swarm
-from .trajectory import Trajectory
 
 #: The short horizons [s] at which position errors are reported.
 HORIZONS = (0.1, 0.5, 1.0)
@@ -79,15 +81,6 @@ INSIDE_ULPS = 64.0
 
 #: Length of the reference run when the simulator has not been stepped yet [s].
 DEFAULT_HORIZON = 1.0
-
-
-@dataclass
-class SimulatedContacts:
-    """Contacts estimated from a run's frames, per sphere (lists of arrays)."""
-
-    time: list[np.ndarray]
-    position: list[np.ndarray]
-    normal: list[np.ndarray]
 
 
 @dataclass
@@ -194,7 +187,7 @@ def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, see
     Raises:
         ValueError: a bad argument (naming it).
     """
-    from .simulator import Simulator
+    from ..simulator import Simulator
 
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a warpsim.Scene, got {type(scene).__name__}")
@@ -357,12 +350,17 @@ def velocities_from_positions(position: np.ndarray, dt: float, gravity, motion: 
 
 
 def contacts_from_frames(position, velocity, dt: float, gravity, motion: str,
-                         threshold: float | None = None) -> SimulatedContacts:
+                         threshold: float | None = None) -> ContactEvents:
     """Contacts of each sphere read from its frames (see the module's docstring).
 
     Args:
         position, velocity: (T, K, 3) [m], [m/s], frame ``j`` at time ``j dt``.
         threshold: velocity change [m/s] that marks a contact (default from the constants).
+
+    Returns:
+        The contacts as a table (``sphere`` the column ``k`` of the arrays, by sphere then
+        time; ``box`` -1 and ``normal_speed`` NaN: the frames do not tell them), every one a
+        bounce.
     """
     g = np.asarray(gravity, dtype=np.float64)
     thr = _dv_threshold(dt, g) if threshold is None else threshold
@@ -371,7 +369,9 @@ def contacts_from_frames(position, velocity, dt: float, gravity, motion: str,
     pre = v0 + g * dt  # linear: the step velocity of the frame; ballistic: the free end velocity
     dv = v1 - pre
     hit = np.linalg.norm(dv, axis=2) > thr  # (T-1, K)
-    times, points, normals = [], [], []
+    empty, none = np.zeros(0), np.zeros(0, np.int64)
+    times, fractions, spheres, frame_of = [empty], [empty], [none], [none]
+    points, normals = [np.zeros((0, 3))], [np.zeros((0, 3))]
     for k in range(position.shape[1]):
         frames = np.flatnonzero(hit[:, k])
         d = -dv[frames, k]  # pre - post (linear) / u0 + g dt - u1 (ballistic)
@@ -388,21 +388,30 @@ def contacts_from_frames(position, velocity, dt: float, gravity, motion: str,
         times.append(frames * dt + tau)
         points.append(point)
         normals.append(-d / np.sqrt(size2)[:, None])
-    return SimulatedContacts(time=times, position=points, normal=normals)
+        spheres.append(np.full(len(frames), k, dtype=np.int64))
+        frame_of.append(frames + 1)
+        fractions.append(tau / dt)
+    count = sum(len(t) for t in times)
+    return ContactEvents(time=np.concatenate(times), sphere=np.concatenate(spheres),
+                         box=np.full(count, -1, dtype=np.int32),
+                         position=np.concatenate(points), normal=np.concatenate(normals),
+                         normal_speed=np.full(count, np.nan),
+                         kind=np.full(count, ContactKind.BOUNCE, dtype=np.int8),
+                         frame=np.concatenate(frame_of), fraction=np.concatenate(fractions))
 
 
-def match_contacts(found: SimulatedContacts, ref: ReferenceRun, spheres, k: int,
+def match_contacts(found: ContactEvents, ref: ReferenceRun, spheres, k: int,
                    threshold: float, frame: float) -> dict:
     """The first ``k`` contacts of each sphere matched in order with the reference's bounces
     that change the velocity by more than ``threshold`` [m/s] (``2 x`` normal speed);
     ``frame`` is the run's time step [s] (a contact in the last two frames may be unmatched)."""
     dts, dxs, mismatched, spheres_with = [], [], 0, 0
-    for k_sim, i in enumerate(spheres):
-        ev = ref.events[i].bounces()
+    for i in spheres:
+        ev = ref.events.of_sphere(i).bounces()
         big = 2.0 * ev.normal_speed > threshold
         rt, rp, rn = ev.time[big][:k], ev.position[big][:k], ev.normal[big][:k]
-        st, sp, sn = (found.time[k_sim][:k], found.position[k_sim][:k],
-                      found.normal[k_sim][:k])
+        mine = found.of_sphere(i)
+        st, sp, sn = mine.time[:k], mine.position[:k], mine.normal[:k]
         m = min(len(rt), len(st))
         if len(rt) or len(st):
             spheres_with += 1
@@ -512,9 +521,8 @@ def inside(scene: Scene, position: np.ndarray, radius, precision: str) -> int:
 
 
 def reference_figures(ref: ReferenceRun) -> dict:
-    counts = np.array([len(e.bounces()) for e in ref.events])
-    return {"spheres": len(ref.events), "incomplete": int(ref.incomplete.sum()),
-            "bounces": int(counts.sum()), "steps": int(ref.steps.sum())}
+    return {"spheres": len(ref.incomplete), "incomplete": int(ref.incomplete.sum()),
+            "bounces": len(ref.events.bounces()), "steps": int(ref.steps.sum())}
 
 
 # -- helpers -----------------------------------------------------------------------------------
@@ -522,7 +530,7 @@ def reference_figures(ref: ReferenceRun) -> dict:
 
 def _like(sim, scene: Scene, sub: Swarm):
     """A simulator for ``sub`` with ``sim``'s settings."""
-    from .simulator import Simulator
+    from ..simulator import Simulator
 
     kwargs = dict(dt=sim.dt, max_bounces=sim.max_bounces, device=sim.device,
                   precision=sim.precision, broad_phase=sim.broad_phase)

@@ -5,19 +5,7 @@ whole *blocks* of spheres; each shard is one task that draws its own spheres on 
 the scene's emitter, the seed and the block numbers: no per-sphere array goes through the
 client), simulates them and writes its own USD layer atomically; the client then writes a small
 root stage composing the layers with the obstacles (layout: :mod:`warpsim.export.layers`).
-
-The sharded draw. Sphere ``i`` of a swarm of ``n`` belongs to block ``i // block``; block ``b``
-is the emitter's draw ``scene.spawn(n=size_b, seed=block_seed(seed, b))`` (``size_b`` is
-``block`` but for a shorter last block). A shard is a run of whole blocks, so any shard draws the
-same spheres as a one-process run of the whole swarm: :func:`sharded_spawn` (all blocks) and
-:func:`shard_swarm` (some blocks) are the one draw both paths use, and the composed result is
-bit-identical whatever the number of workers or shards. Every block is checked clear of the
-obstacles, per sphere (the emitter's rejection sampling, then
-:func:`warpsim.validation.check_outside`), exactly as :meth:`warpsim.Scene.spawn` checks it.
-It is **not** the draw of ``scene.spawn(n, seed)`` (one stream for the whole swarm): a single
-stream cannot be split among workers without drawing all of it, so the sharded draw is its own
-(equally valid) sample; ``warpsim run`` without ``--dask`` keeps ``scene.spawn``. Changing
-``block`` changes the draw; it is stored in every manifest.
+The spheres are the sharded draw of :mod:`warpsim.distributed.draw`.
 
 Faults. A worker that dies loses only the tasks it was running, which Dask runs again
 elsewhere. Layers are written under a temporary name and renamed: a file under a shard's name is
@@ -33,28 +21,30 @@ needs warpsim installed.
 from __future__ import annotations
 
 import contextlib
-import functools
 import hashlib
 import json
 import secrets
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from . import validation as check
-from .scene import Scene
-from .swarm import Swarm
-
-DEFAULT_BLOCK = 1024
-"""Spheres per block of the sharded draw. Measured on the room scene: drawing a block costs
-about 5 ms of fixed overhead plus 5 us per sphere, so 1024-sphere blocks keep the draw within
-7 us per sphere (a 300-frame run costs about 45 us per sphere) while a shard can still be as
-small as one block."""
+from .. import validation as check
+from ..scene import Scene
+from ..swarm import Swarm
+from .cluster import (
+    CONNECT_TIMEOUT,
+    LOCAL,
+    client_for,
+    cluster_threads,
+    require_dask,
+    scheduler_address,
+)
+from .draw import DEFAULT_BLOCK, block_count, check_draw, plan_shards, shard_swarm, spawn_block
 
 MAX_SHARD_BYTES = 1 << 30
 """A shard task holds its recorded frames in memory until its layer is written (28 bytes per
@@ -68,157 +58,8 @@ PROGRESS_SPHERE_FRAMES = 1 << 22
 """A shard simulates in chunks of about this many sphere-frames (a few tenths of a second on one
 core) and reports its progress after each; the result is the same bits as one run."""
 
-CONNECT_TIMEOUT = 10.0
-"""Seconds to wait for a Dask scheduler before the error [s]."""
-
-DEFAULT_SCHEDULER_PORT = 8786  # Dask's own default, for an address given without a port
-LOCAL = "local"  # the client value (and ``--dask`` without an address) that starts a LocalCluster
-DASK_MISSING = 'dask is needed for distributed runs: pip install "warpsim[dask]"'
-SEED_LIMIT = 1 << 31  # emitter seeds are integers below 2**31
-_BLOCK_TAG = 0x5751_4B42  # domain separation of the block-seed keys from other uses of a seed
 _STORED_BYTES = 28  # per sphere-frame: float32 positions (12) and orientations (16)
 _VELOCITY_BYTES = 24  # per sphere-frame: float32 velocities and angular velocities
-
-
-# --------------------------------------------------------------------------------------------
-# The sharded draw
-
-
-def _feistel_round(half: int, key: int) -> int:
-    h = (half * 0x9E3779B1 + key) & 0xFFFFFFFF
-    h ^= h >> 15
-    h = (h * 0x85EBCA6B) & 0xFFFFFFFF
-    h ^= h >> 13
-    return h & 0xFFFF
-
-
-@functools.lru_cache(maxsize=64)
-def _block_keys(seed: int) -> tuple[int, ...]:
-    """The four round keys of a seed's block permutation."""
-    return tuple(int(k) for k in np.random.SeedSequence([_BLOCK_TAG, seed]).generate_state(4))
-
-
-def block_seed(seed: int, block: int) -> int:
-    """The emitter seed of block ``block`` of the sharded draw with seed ``seed``.
-
-    A keyed permutation of ``[0, 2**31)`` (a four-round Feistel network on 32 bits, cycle-walked
-    into 31 bits, keyed by ``numpy.random.SeedSequence`` of the seed): the blocks of one run
-    always get distinct seeds (so distinct streams), and the block seeds of two different run
-    seeds are unrelated.
-
-    Args:
-        seed: the run's seed, an integer >= 0.
-        block: the block number, in ``[0, 2**31)``.
-
-    Returns:
-        An integer in ``[0, 2**31)``.
-    """
-    seed = check.positive_int("seed", seed, minimum=0)
-    block = check.positive_int("block", block, minimum=0)
-    keys = _block_keys(seed)
-    x = block
-    while True:  # cycle walking: a permutation of [0, 2**32) restricted to [0, 2**31)
-        left, right = x >> 16, x & 0xFFFF
-        for key in keys:
-            left, right = right, left ^ _feistel_round(right, key)
-        x = (left << 16) | right
-        if x < SEED_LIMIT:
-            return x
-
-
-def _check_draw(scene: Scene, n, seed, block) -> tuple[int, int, int]:
-    """Validated ``(n, seed, block)`` of the scene's sharded draw (n=None: the emitter's count,
-    seed=None: the emitter's seed)."""
-    if not isinstance(scene, Scene):
-        raise ValueError(f"scene must be a warpsim.Scene, got {type(scene).__name__}")
-    if scene.emitter is None:
-        raise ValueError(f"scene {scene.name!r} has no emitter: a sharded run draws its spheres "
-                         f"from the scene's emitter")
-    n = scene.emitter.count if n is None else check.positive_int("n", n)
-    seed = scene.emitter.seed if seed is None else check.positive_int("seed", seed, minimum=0)
-    block = check.positive_int("block", block)
-    return n, seed, block
-
-
-def block_count(n: int, block: int = DEFAULT_BLOCK) -> int:
-    """Blocks of a swarm of ``n`` spheres: ``ceil(n / block)``."""
-    return -(-n // block)
-
-
-def spawn_block(scene: Scene, n: int | None, seed: int | None, index: int,
-                block: int = DEFAULT_BLOCK) -> Swarm:
-    """Spheres ``index * block`` to ``min((index + 1) * block, n)`` of the sharded draw.
-
-    Args:
-        scene: a scene with an emitter and obstacles.
-        n: spheres of the whole swarm (None: the emitter's count).
-        seed: the run's seed (None: the emitter's).
-        index: the block number, in ``[0, ceil(n / block))``.
-        block: spheres per block.
-
-    Returns:
-        The block's spheres, each clear of every obstacle.
-
-    Raises:
-        ValueError: bad arguments (named), or the emitter cannot place the block.
-    """
-    n, seed, block = _check_draw(scene, n, seed, block)
-    blocks = block_count(n, block)
-    index = check.positive_int("index", index, minimum=0, maximum=blocks - 1,
-                               reason=f"{n} spheres make {blocks} blocks of {block}")
-    size = min(block, n - index * block)
-    return scene.spawn(n=size, seed=block_seed(seed, index))
-
-
-def shard_swarm(scene: Scene, n: int | None, seed: int | None, start: int, stop: int,
-                block: int = DEFAULT_BLOCK) -> Swarm:
-    """Spheres ``start`` to ``stop`` (excluded) of the sharded draw, made of whole blocks.
-
-    Args:
-        start: a multiple of ``block``; stop: a multiple of ``block`` or ``n``, > ``start``.
-
-    Raises:
-        ValueError: a range that is not whole blocks, or out of ``[0, n]``.
-    """
-    n, seed, block = _check_draw(scene, n, seed, block)
-    start = check.positive_int("start", start, minimum=0, maximum=n - 1)
-    stop = check.positive_int("stop", stop, minimum=start + 1, maximum=n)
-    if start % block or (stop % block and stop != n):
-        raise ValueError(f"spheres {start}..{stop} are not whole blocks of {block} (a shard "
-                         f"starts and ends on a multiple of block, or ends at n = {n})")
-    parts = [spawn_block(scene, n, seed, b, block) for b in range(start // block,
-                                                                   block_count(stop, block))]
-    return _joined(parts)
-
-
-def sharded_spawn(scene: Scene, n: int | None = None, seed: int | None = None,
-                  block: int = DEFAULT_BLOCK) -> Swarm:
-    """The whole swarm of the sharded draw, in one process: the spheres :func:`run` simulates,
-    for a one-process run of the same spheres (``Simulator(scene, sharded_spawn(...))``)."""
-    n, seed, block = _check_draw(scene, n, seed, block)
-    return shard_swarm(scene, n, seed, 0, n, block)
-
-
-def _joined(parts: list[Swarm]) -> Swarm:
-    if len(parts) == 1:
-        return parts[0]
-    return Swarm(**{name: np.concatenate([getattr(p, name) for p in parts])
-                    for name in ("position", "velocity", "radius", "mass", "angular_momentum",
-                                 "orientation")})
-
-
-def plan_shards(n: int, shards: int, block: int = DEFAULT_BLOCK) -> list[tuple[int, int]]:
-    """``shards`` contiguous sphere ranges ``(start, stop)`` of whole blocks, nearly equal.
-
-    At most one shard per block: asking for more shards than blocks gives one per block.
-    """
-    n = check.positive_int("n", n)
-    block = check.positive_int("block", block)
-    shards = check.positive_int("shards", shards)
-    blocks = block_count(n, block)
-    edges = np.linspace(0, blocks, min(shards, blocks) + 1).round().astype(np.int64)
-    return [(int(a) * block, min(int(b) * block, n))
-            for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
 
 
 # --------------------------------------------------------------------------------------------
@@ -263,13 +104,13 @@ class RunSpec:
         return len(self.bounds)
 
     def layer_path(self, index: int) -> Path:
-        from .export.layers import shard_name
+        from ..export.layers import shard_name
 
         return Path(self.folder) / f"{shard_name(index, self.count)}.usdc"
 
     def shard_key(self, index: int) -> str:
         """Hash of everything that determines shard ``index``'s bits."""
-        from . import __version__
+        from .. import __version__
 
         start, stop = self.bounds[index]
         fields_ = {"version": __version__, "scene": self.scene_key, "n": self.n,
@@ -304,7 +145,7 @@ def scene_key(scene: Scene) -> str:
 
 
 def _simulator(scene: Scene, swarm: Swarm, spec: RunSpec):
-    from .simulator import Simulator
+    from ..simulator import Simulator
 
     return Simulator(scene, swarm, dt=spec.dt, max_bounces=spec.max_bounces, device=spec.device,
                      precision=spec.precision, broad_phase=spec.broad_phase,
@@ -334,8 +175,8 @@ def simulate_shard(scene: Scene, spec: RunSpec, index: int,
         ``index``, ``digest`` of the layer's arrays, ``seconds`` (wall, the whole task),
         ``sphere_frames``, ``bounces``, ``capped``, ``worker`` (its address).
     """
-    from .export.layers import write_shard_layer
-    from .trajectory import Trajectory
+    from ..export.layers import write_shard_layer
+    from ..trajectory import Trajectory
 
     begin = time.perf_counter()
     start, stop = spec.bounds[index]
@@ -374,7 +215,7 @@ def simulate_shard(scene: Scene, spec: RunSpec, index: int,
 
 def _without_first(part):
     """A chunk's records but its first (the previous chunk's last)."""
-    from .trajectory import Trajectory
+    from ..trajectory import Trajectory
 
     def cut(values):
         return None if values is None else values[1:]
@@ -385,7 +226,7 @@ def _without_first(part):
 
 
 def _concatenated(parts):
-    from .trajectory import Trajectory
+    from ..trajectory import Trajectory
 
     if len(parts) == 1:
         return parts[0]
@@ -417,96 +258,6 @@ def _dask_shard_task(scene: Scene, spec: RunSpec, index: int) -> dict:
             worker.log_event(spec.topic, {"index": int(i), "done": int(sphere_frames)})
 
     return simulate_shard(scene, spec, index, report)
-
-
-# --------------------------------------------------------------------------------------------
-# Clients
-
-
-def require_dask():
-    """Import ``distributed``; a missing one is a one-line ImportError naming the extra."""
-    try:
-        import distributed
-    except ImportError:
-        raise ImportError(DASK_MISSING) from None
-    return distributed
-
-
-def scheduler_address(text: str) -> str:
-    """A scheduler address in Dask's form (``tcp://HOST:PORT``), checked.
-
-    Accepts ``HOST:PORT``, ``HOST`` (port 8786, Dask's default) and ``SCHEME://HOST:PORT`` for
-    the schemes Dask knows (``tcp``, ``tls``, ``inproc``, ``ucx``, ``ws``, ``wss``).
-
-    Raises:
-        ValueError: not a string, empty, an unknown scheme, no host, or a bad port.
-    """
-    if not isinstance(text, str) or not text.strip():
-        raise ValueError(f"Dask scheduler address must be HOST:PORT or tcp://HOST:PORT, got "
-                         f"{text!r}")
-    raw = text.strip()
-    scheme, sep, rest = raw.partition("://")
-    if not sep:
-        scheme, rest = "tcp", raw
-    known = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
-    if scheme not in known:
-        raise ValueError(f"Dask scheduler address {text!r}: unknown scheme {scheme!r} (use one "
-                         f"of {', '.join(known)})")
-    if scheme == "inproc":
-        if not rest:
-            raise ValueError(f"Dask scheduler address {text!r} has no location")
-        return raw
-    host, colon, port = rest.rpartition(":")
-    if not colon:
-        host, port = rest, str(DEFAULT_SCHEDULER_PORT)
-    if host.startswith("[") and host.endswith("]"):
-        host = host[1:-1]
-    if not host or "/" in host or any(c.isspace() for c in host):
-        raise ValueError(f"Dask scheduler address {text!r} has no valid host (expected "
-                         f"HOST:PORT or tcp://HOST:PORT)")
-    if not port.isdigit() or not 0 < int(port) < 65536:
-        raise ValueError(f"Dask scheduler address {text!r}: port must be an integer in "
-                         f"1..65535, got {port!r}")
-    shown = f"[{host}]" if ":" in host else host
-    return f"{scheme}://{shown}:{int(port)}"
-
-
-@contextlib.contextmanager
-def _client_for(client, workers: int | None, timeout: float):
-    """Yield a connected ``distributed.Client`` for ``client`` (LOCAL, an address or a Client);
-    what this opened is closed on exit."""
-    distributed = require_dask()
-    if isinstance(client, distributed.Client):
-        yield client
-        return
-    if client == LOCAL:
-        if workers is not None:
-            check.positive_int("workers", workers)
-        with distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                      dashboard_address=None) as cluster, \
-                distributed.Client(cluster) as local:
-            yield local
-        return
-    if not isinstance(client, str):
-        raise ValueError(f"client must be None, {LOCAL!r}, a scheduler address or a "
-                         f"distributed.Client, got {type(client).__name__}")
-    address = scheduler_address(client)
-    try:
-        remote = distributed.Client(address, timeout=timeout)
-    except (OSError, TimeoutError) as exc:
-        reason = " ".join(str(exc).split()) or type(exc).__name__
-        raise OSError(f"no Dask scheduler answered at {address} within {timeout:g} s "
-                      f"({reason})") from None
-    try:
-        yield remote
-    finally:
-        remote.close()
-
-
-def _cluster_threads(client) -> tuple[int, int]:
-    """(workers, threads) of the cluster now."""
-    workers = client.scheduler_info().get("workers", {})
-    return len(workers), sum(int(w.get("nthreads", 1)) for w in workers.values())
 
 
 # --------------------------------------------------------------------------------------------
@@ -662,13 +413,13 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         OSError: the output cannot be written; no scheduler at the address.
         ImportError: a client is asked for and dask is not installed (names the extra).
     """
-    from .export.files import check_writable
-    from .export.layers import shard_folder, shard_manifest, write_root_stage
+    from ..export.files import check_writable
+    from ..export.layers import shard_folder, shard_manifest, write_root_stage
 
     began = time.perf_counter()
     if not isinstance(scene, Scene):
         scene = Scene.load(scene)
-    n, seed, block = _check_draw(scene, n, seed, block)
+    n, seed, block = check_draw(scene, n, seed, block)
     if len(scene.boxes) == 0:
         raise ValueError(f"scene {scene.name!r} has no obstacles: the simulator then takes its "
                          f"energy origin from the swarm, which a shard does not see whole, so "
@@ -706,7 +457,7 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
     spec = _replace(spec, dt=float(probe.dt), max_bounces=int(probe.max_bounces))
     records = spec.recorded_frames()
     if max_bytes is not None:
-        from .export import estimate_usd_bytes
+        from ..export import estimate_usd_bytes
 
         estimate = estimate_usd_bytes(n, records.size, "usdc", velocities=velocities)
         if estimate > max_bytes:
@@ -720,10 +471,10 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         done, computed, cluster_workers = _run_here(scene, spec, progress)
     else:
         require_dask()
-        with _client_for(client, workers, timeout) as dask_client:
-            cluster_workers, cluster_threads = _cluster_threads(dask_client)
+        with client_for(client, workers, timeout) as dask_client:
+            cluster_workers, threads_now = cluster_threads(dask_client)
             count = shards or _default_shards(n, block, records.size, velocities,
-                                              TASKS_PER_THREAD * max(cluster_threads, 1))
+                                              TASKS_PER_THREAD * max(threads_now, 1))
             spec = _replace(spec, bounds=tuple(plan_shards(n, count, block)),
                             threads=1 if threads is None else threads,
                             topic=f"warpsim-progress-{secrets.token_hex(6)}")
@@ -752,44 +503,6 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         digests=tuple(r["digest"] for r in results),
         computed_by={i: done[i]["worker"] for i in recomputed})
 
-
-def run_command(args, scene: Scene) -> RunSummary:
-    """``warpsim run SCENE --dask [ADDRESS] [--shards N] [--block B]``: :func:`run` from the
-    command line's options (``--shards`` or ``--block`` without ``--dask`` shard in this
-    process). ``--workers`` is the threads of each shard's simulator.
-
-    Raises:
-        ValueError: an option a sharded run does not support, or a bad value (named).
-    """
-    for option, value in (("--spheres", args.spheres), ("--events", args.events),
-                          ("--events-capacity", args.events_capacity),
-                          ("--error-sample", args.error_sample)):
-        if value is not None:
-            raise ValueError(f"{option} is not supported with --dask/--shards (a sharded run "
-                             f"writes every sphere, one layer per shard)")
-    if args.frames is not None and args.end is not None and args.end > args.frames:
-        raise ValueError(f"--end {args.end} is past --frames {args.frames}")
-    end = args.end if args.end is not None else args.frames
-    if args.output is not None and not args.output.strip():
-        raise ValueError("output path (-o) is empty")
-    output = args.output if args.output is not None else f"{scene.name}.usdc"
-    client = args.dask
-    if client not in (None, LOCAL):
-        client = scheduler_address(client)
-    where = ("this process" if client is None else "a local Dask cluster" if client == LOCAL
-             else f"the Dask scheduler at {client}")
-    n = scene.emitter.count if args.count is None and scene.emitter is not None else args.count
-    print(f"{scene.name}: {n} spheres, {len(scene.boxes)} obstacles, sharded on {where}",
-          file=sys.stderr)
-    return run(scene, output, n=args.count, seed=args.seed, frames=end, start=args.start,
-               every=args.every, client=client, shards=args.shards,
-               block=DEFAULT_BLOCK if args.block is None else args.block, threads=args.workers,
-               dt=args.dt, max_bounces=args.max_bounces, device=args.device,
-               precision=args.precision, broad_phase=args.broad_phase,
-               velocities=bool(args.velocities), motion=args.motion,
-               progress=not args.no_progress, max_bytes=args.max_bytes)
-
-
 def _replace(spec: RunSpec, **changes) -> RunSpec:
     from dataclasses import replace
 
@@ -798,7 +511,7 @@ def _replace(spec: RunSpec, **changes) -> RunSpec:
 
 def _reusable(spec: RunSpec) -> dict[int, dict]:
     """The shards whose layer is complete and current: index -> what the manifest says."""
-    from .export.layers import shard_manifest
+    from ..export.layers import shard_manifest
 
     found = {}
     for i in range(spec.count):
@@ -881,87 +594,9 @@ def _run_on(client, scene: Scene, spec: RunSpec, progress: bool):
     return done, set(todo)
 
 
-# --------------------------------------------------------------------------------------------
-# Sweeps
-
-
-def sweep(function: Callable, items: Iterable, *, client=None, workers: int | None = None,
-          progress: bool = True, timeout: float = CONNECT_TIMEOUT) -> list:
-    """``[function(item) for item in items]``, one Dask task per item, results in order.
-
-    For many scenes or settings at once, such as the accuracy study of several scenes
-    (``sweep(warpsim.accuracy.main, [["room", "--out", "acc/room"], ...], client=...)``).
-    ``function`` must be importable or picklable by cloudpickle on the workers.
-
-    Args:
-        function: called once per item, on a worker.
-        items: the arguments, one per task.
-        client: as in :func:`run`: None in this process, ``"local"``, an address or a
-            ``distributed.Client``.
-        workers: processes of a ``"local"`` cluster.
-        progress: a tqdm bar over the items.
-        timeout: seconds to wait for a scheduler at an address [s].
-
-    Returns:
-        The results, in the order of ``items``.
-
-    Raises:
-        ValueError: an item's task failed (the message names the item's position).
-    """
-    items = list(items)
-    if not callable(function):
-        raise ValueError(f"function must be callable, got {type(function).__name__}")
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=len(items), unit="task", file=sys.stderr, dynamic_ncols=True)
-    try:
-        if client is None:
-            results = []
-            for k, item in enumerate(items):
-                try:
-                    results.append(function(item))
-                except Exception as exc:
-                    raise ValueError(f"sweep item {k} ({item!r}) failed: "
-                                     f"{' '.join(str(exc).split())}") from exc
-                if bar is not None:
-                    bar.update(1)
-            return results
-        require_dask()
-        from distributed import as_completed
-
-        with _client_for(client, workers, check.scalar("timeout", timeout, positive=True)) as c:
-            futures = c.map(function, items, pure=False)
-            index = {f.key: k for k, f in enumerate(futures)}
-            results = [None] * len(items)
-            try:
-                for future in as_completed(futures):
-                    k = index[future.key]
-                    try:
-                        results[k] = future.result()
-                    except Exception as exc:
-                        raise ValueError(f"sweep item {k} ({items[k]!r}) failed: "
-                                         f"{' '.join(str(exc).split())}") from exc
-                    if bar is not None:
-                        bar.update(1)
-            finally:
-                for future in futures:
-                    future.cancel()
-            return results
-    finally:
-        if bar is not None:
-            bar.close()
-
-
 def read(path):
     """The composed result of :func:`run`, as one :class:`warpsim.Trajectory` (spheres in swarm
     order; see :func:`warpsim.export.layers.read_sharded_usd`)."""
-    from .export.layers import read_sharded_usd
+    from ..export.layers import read_sharded_usd
 
     return read_sharded_usd(path)
-
-
-__all__ = ["DEFAULT_BLOCK", "LOCAL", "RunSpec", "RunSummary", "block_count", "block_seed",
-           "plan_shards", "read", "run", "scene_key", "scheduler_address", "shard_swarm",
-           "sharded_spawn", "simulate_shard", "spawn_block", "sweep"]

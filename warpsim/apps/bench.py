@@ -16,7 +16,6 @@ scripts in the repository's ``benchmarks/`` folder, not part of the package: see
 from __future__ import annotations
 
 import argparse
-import inspect
 import json
 import os
 import platform
@@ -28,12 +27,15 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
+from ..validation import PRECISIONS
+from ..vocabulary import BroadPhase, Motion
+
+BROAD_PHASES = tuple(BroadPhase)
+MOTIONS = tuple(Motion)
+
 PROG = "warpsim bench"
 DESCRIPTION = ("The throughput of one scene on this machine: kernel build timed apart, one "
                "warm-up frame, then sphere-frames per second over the timed frames.")
-PRECISIONS = ("float32", "float64")
-BROAD_PHASES = ("auto", "brute", "bvh", "grid")
-MOTIONS = ("linear", "ballistic")
 EXIT_ERROR = 1
 EXIT_USAGE = 2
 
@@ -146,17 +148,13 @@ def measure(scene_name: str, count: int | None = None, frames: int | None = None
     Raises:
         ValueError: a bad scene, option or device, in one line.
     """
-    from . import __version__
-    from .scene import Scene
-    from .simulator import Simulator
+    from .. import __version__
+    from ..scene import Scene
+    from ..simulator import Simulator
 
     scene = Scene.load(scene_name)
     frames = scene.frames if frames is None else frames
-    extra = {}
-    if motion is not None:
-        if "motion" not in inspect.signature(Simulator).parameters:
-            raise ValueError("--motion needs a warpsim whose Simulator takes motion=")
-        extra["motion"] = motion
+    extra = {} if motion is None else {"motion": motion}
     start = time.perf_counter()
     swarm = scene.spawn(n=count)
     sim = Simulator(scene, swarm, device=device, precision=precision, workers=workers,
@@ -179,7 +177,7 @@ def measure(scene_name: str, count: int | None = None, frames: int | None = None
         "scene": scene.name, "source": scene.source, "boxes": len(scene.boxes), "n": n,
         "frames": frames, "dt": sim.dt, "precision": sim.precision,
         "max_bounces": sim.max_bounces, "broad_phase": sim.broad_phase, "workers": sim.workers,
-        "motion": getattr(sim, "motion", motion), "setup_s": setup_s, "build_s": build_s,
+        "motion": sim.motion, "setup_s": setup_s, "build_s": build_s,
         "build_cached": (not built) if sim.device.is_cpu else None, "warmup_s": warmup_s,
         "seconds": seconds, "sphere_frames_per_s": sphere_frames / seconds,
         "ns_per_sphere_frame": seconds / sphere_frames * 1e9,
@@ -215,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``warpsim bench``; returns the exit code (0, 1 on an error, 2 on bad
     usage), errors in one line on standard error."""
     args = build_parser().parse_args(argv)
-    from .cli import init_warp
+    from .startup import init_warp
 
     init_warp(debug=False)  # without Warp's start-up lines (a machine without CUDA has some)
     try:

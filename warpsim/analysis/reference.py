@@ -51,10 +51,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import validation as check
-from .obstacles import quat_to_matrix
-from .scene import Scene
-from .swarm import Swarm
+from .. import validation as check
+from ..events import ContactEvents
+from ..obstacles import quat_to_matrix
+from ..scene import Scene
+from ..swarm import Swarm
+from ..vocabulary import ContactKind
 
 #: A landing this close to a surface, in units of the float64 rounding of the scene's
 #: coordinates, is a contact: far above the rounding of the distance (a few units), far below
@@ -103,43 +105,6 @@ MAX_CONTACTS_AT_ONE_POINT = 64
 #: a loop that makes no progress; none is known).
 MAX_STALLED_STEPS = 1000
 
-BOUNCE = 0
-"""Event kind: an elastic (or lossy) reflection."""
-SUPPORT = 1
-"""Event kind: the start of a support (resting or sliding) contact."""
-
-
-@dataclass
-class ContactEvents:
-    """The contacts of one sphere, in time order.
-
-    Attributes:
-        time: contact times [s], shape (M,).
-        box: index of the box touched, shape (M,), int64.
-        normal: unit outward normal of the box at the contact, world frame, shape (M, 3).
-        position: sphere centre at the contact [m], shape (M, 3).
-        normal_speed: approach speed ``-u . n`` just before the contact [m/s], shape (M,)
-            (can be <= 0 for a support a sphere slides onto).
-        kind: ``BOUNCE`` (0) or ``SUPPORT`` (1), shape (M,), int8.
-    """
-
-    time: np.ndarray
-    box: np.ndarray
-    normal: np.ndarray
-    position: np.ndarray
-    normal_speed: np.ndarray
-    kind: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.time.shape[0])
-
-    def bounces(self) -> ContactEvents:
-        """Only the reflections (no supports)."""
-        keep = self.kind == BOUNCE
-        return ContactEvents(self.time[keep], self.box[keep], self.normal[keep],
-                             self.position[keep], self.normal_speed[keep], self.kind[keep])
-
-
 @dataclass
 class ReferenceRun:
     """The exact motion of a swarm, sampled at given times.
@@ -148,7 +113,9 @@ class ReferenceRun:
         times: sample times [s], shape (T,), as given.
         position: sphere centres at those times [m], shape (T, N, 3), float64.
         velocity: true velocities at those times [m/s], shape (T, N, 3), float64.
-        events: one :class:`ContactEvents` per sphere.
+        events: every sphere's contacts (:class:`warpsim.ContactEvents` without frames: time,
+            sphere, box, normal, position, approach speed, :class:`warpsim.ContactKind`), by
+            sphere then time; ``events.of_sphere(i)`` holds sphere ``i``'s.
         incomplete: spheres given up (``MAX_EVENTS``, ``MAX_STEPS``), shape (N,); their samples
             after that point are NaN.
         steps: advancement steps taken per sphere, shape (N,) (cost, for information).
@@ -158,7 +125,7 @@ class ReferenceRun:
     times: np.ndarray
     position: np.ndarray
     velocity: np.ndarray
-    events: list[ContactEvents]
+    events: ContactEvents
     incomplete: np.ndarray
     steps: np.ndarray
     t_end: float
@@ -209,20 +176,9 @@ def simulate(scene: Scene, swarm: Swarm, t_end: float, times=None) -> ReferenceR
         events.append(flight.events())
         incomplete[i] = flight.incomplete
         steps[i] = flight.steps
-    return ReferenceRun(times=times, position=position, velocity=velocity, events=events,
+    return ReferenceRun(times=times, position=position, velocity=velocity,
+                        events=ContactEvents.concatenate(events),
                         incomplete=incomplete, steps=steps, t_end=t_end)
-
-
-def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, seed: int = 0,
-            **options):
-    """The error report of a run against this reference (see :mod:`warpsim.error_report`).
-
-    Returns:
-        :class:`warpsim.error_report.ErrorReport` (``summary()`` text, ``to_dict()``).
-    """
-    from .error_report import compare as _compare
-
-    return _compare(sim_or_trajectory, scene, swarm, sample=sample, seed=seed, **options)
 
 
 # -- internals ---------------------------------------------------------------------------------
@@ -408,7 +364,7 @@ class _Flight:
             j += 1
         self._next = j
 
-    def _event(self, box: int, normal: np.ndarray, speed: float, kind: int) -> bool:
+    def _event(self, box: int, normal: np.ndarray, speed: float, kind: ContactKind) -> bool:
         self._ev.append((self.t, box, normal.copy(), self.x.copy(), speed, kind))
         if len(self._ev) > MAX_EVENTS:
             self.incomplete = True
@@ -442,13 +398,13 @@ class _Flight:
                 self.supports.append(j)
                 contact[j] = False
                 changed_supports = True
-                if not self._event(j, normal[j], speed, SUPPORT):
+                if not self._event(j, normal[j], speed, ContactKind.SUPPORT):
                     return False
             else:
                 self.u = self.u - 2.0 * un[j] * normal[j]
                 if self.w.lossy:
                     self.u = self.u * self.w.keep
-                if not self._event(j, normal[j], speed, BOUNCE):
+                if not self._event(j, normal[j], speed, ContactKind.BOUNCE):
                     return False
                 if self.supports:  # a bounce ends a slide; supports are found again below
                     self.supports = []
@@ -463,7 +419,7 @@ class _Flight:
             if j not in self.supports and self._presses(normal[j]):
                 self.supports.append(int(j))
                 changed_supports = True
-                if not self._event(int(j), normal[j], -float(un[j]), SUPPORT):
+                if not self._event(int(j), normal[j], -float(un[j]), ContactKind.SUPPORT):
                     return False
         if changed_supports:
             self._start_slide(gap, normal, face)
@@ -529,12 +485,13 @@ class _Flight:
         return step
 
     def events(self) -> ContactEvents:
+        """This sphere's contacts, in time order."""
         ev = self._ev
         if not ev:
-            return ContactEvents(np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3)),
-                                 np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int8))
+            return ContactEvents.empty(frames=False)
         return ContactEvents(time=np.array([e[0] for e in ev]),
-                             box=np.array([e[1] for e in ev], dtype=np.int64),
+                             sphere=np.full(len(ev), self.index, dtype=np.int64),
+                             box=np.array([e[1] for e in ev], dtype=np.int32),
                              normal=np.array([e[2] for e in ev]),
                              position=np.array([e[3] for e in ev]),
                              normal_speed=np.array([e[4] for e in ev]),

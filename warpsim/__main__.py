@@ -1,0 +1,5 @@
+"""``python -m warpsim``: the ``warpsim`` command line."""
+
+from .apps.cli import main
+
+raise SystemExit(main())
