@@ -13,5 +13,6 @@
 - ``python -m benchmarks.usd_write``, ``python -m benchmarks.dask_scaling``: USD writing time,
   and sphere-frames per second against Dask workers.
 
-Each prints markdown tables and writes its JSON under ``bench-results/``.
+Each prints markdown tables and writes its JSON under ``benchmarks/results/`` (with the
+machine and the git commit, :func:`warpsim.machine.machine`).
 """

@@ -2,7 +2,7 @@
 
 Run from the repository root: ``python -m benchmarks.ballistic [--quick] [--out PATH.json]``.
 Prints three Markdown tables and writes their rows to JSON (default
-``bench-results/ballistic.json``):
+``benchmarks/results/ballistic.json``, ``ballistic-quick.json`` with ``--quick``):
 
 1. error against ``warpsim.analysis.reference`` (float64, event-driven, exact) of a swarm dropped
    onto tilted rounded plates (the bundled ``plates`` scene), after 0.5 s, at dt = 1/30 ... 1/240 s,
@@ -19,9 +19,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
-import platform
-import sys
 import time
 from pathlib import Path
 
@@ -29,8 +26,12 @@ import numpy as np
 
 import warpsim as ws
 from warpsim.analysis import reference
+from warpsim.energy import relative_change
+from warpsim.export.files import write_json
+from warpsim.machine import machine
 
-DEFAULT_OUT = "bench-results/ballistic.json"
+from .common import RESULTS
+
 STEPS = (1 / 30, 1 / 60, 1 / 120, 1 / 240)
 """Time steps [s] of the accuracy table."""
 HORIZON = 0.5
@@ -82,9 +83,7 @@ def drift_rows(n: int, frames: int) -> list[dict]:
             sim = ws.Simulator(scene, swarm, motion=motion, precision=precision,
                                energy_correction=False, device="cpu", workers=1)
             sim.step(frames)
-            e0 = sim.initial_energy
-            scale = np.maximum(np.abs(e0), sim.mass * 9.81 * 1.0)
-            drift = (sim.mechanical_energy() - e0) / scale
+            drift = relative_change(sim, swarm.position)
             rows.append({"motion": motion, "precision": precision, "frames": frames,
                          "max_gain": float(drift.max()), "max_loss": float(-drift.min()),
                          "median": float(np.median(drift))})
@@ -130,7 +129,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m benchmarks.ballistic",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes (about a minute)")
-    parser.add_argument("--out", default=DEFAULT_OUT, help="JSON output path")
+    parser.add_argument("--out", default=None, help="JSON output path (default: "
+                                                     "benchmarks/results/ballistic.json)")
     args = parser.parse_args(argv)
     quick = args.quick
     acc = accuracy_rows(32 if quick else 96)
@@ -150,12 +150,9 @@ def main(argv: list[str] | None = None) -> int:
                 [[r["speed"], r["precision"], f"{r['linear_ns']:.0f}",
                   f"{r['ballistic_ns']:.0f}", f"{r['ratio']:.2f}", r["broad_phase"]]
                  for r in cost]))
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({
-        "machine": {"platform": platform.platform(), "python": sys.version.split()[0],
-                    "warpsim": ws.__version__},
-        "accuracy": acc, "drift": drift, "cost": cost}, indent=1))
+    out = Path(args.out) if args.out else RESULTS / (
+        f"ballistic{'-quick' if quick else ''}.json")
+    write_json(out, {"machine": machine(), "accuracy": acc, "drift": drift, "cost": cost})
     print(f"wrote {out}")
     return 0
 

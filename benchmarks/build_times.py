@@ -188,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.build_times",
                                 description=__doc__.split("\n\n")[0].replace("\n", " "))
     p.add_argument("--quick", action="store_true", help="a representative subset (10 builds)")
-    p.add_argument("--out", default=None, help="JSON results (default: bench-results/"
+    p.add_argument("--out", default=None, help="JSON results (default: benchmarks/results/"
                                                 "build_times.json)")
     p.add_argument("--child", help=argparse.SUPPRESS)
     p.add_argument("--cache", help=argparse.SUPPRESS)
@@ -196,7 +196,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.child is not None:
         print(json.dumps(child(json.loads(args.child), args.cache)))
         return 0
-    from warpsim.apps.bench import machine, write_json_atomic
+    from warpsim.export.files import write_json
+    from warpsim.machine import machine
 
     started = time.perf_counter()
     info = machine()
@@ -227,7 +228,7 @@ def main(argv: list[str] | None = None) -> int:
         f"build_times{'-quick' if args.quick else ''}.json")
     results = {"machine": info, "quick": args.quick, "rows": rows, "summary": lines,
                "runtime_s": time.perf_counter() - started}
-    write_json_atomic(out, results)
+    write_json(out, results)
     print(f"\nruntime {results['runtime_s']:.1f} s; results written to {out}")
     return 0 if all("seconds" in r for r in rows) else 1
 

@@ -20,10 +20,12 @@ import numpy as np
 import warp as wp
 
 import warpsim as ws
-from warpsim.apps.bench import machine, write_json_atomic
+from warpsim.export.files import write_json
+from warpsim.machine import machine
 
-RESULTS = Path("bench-results")
-"""Where the studies write their JSON (created), relative to the working directory."""
+RESULTS = Path(__file__).resolve().parent / "results"
+"""Where the studies write their JSON by default (``benchmarks/results/``, where the committed
+results are; quick runs as ``NAME-quick.json``, which git ignores)."""
 
 ROOM = "room"
 """The bundled standard room (22 boxes): ``ws.Scene.load(ROOM)``."""
@@ -101,7 +103,8 @@ def parser(prog: str, doc: str) -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true",
                    help="small sizes and short timings (noisy; for development)")
     p.add_argument("--device", default="cpu", help="Warp device: cpu or cuda:0 (default cpu)")
-    p.add_argument("--out", default=None, help="JSON results (default: bench-results/NAME.json)")
+    p.add_argument("--out", default=None,
+                   help="JSON results (default: benchmarks/results/NAME.json)")
     return p
 
 
@@ -124,7 +127,7 @@ def start(name: str, args: argparse.Namespace):
 def finish(out: Path, results: dict, started: float) -> None:
     """Write the JSON atomically and say where it went."""
     results["runtime_s"] = time.perf_counter() - started
-    write_json_atomic(out, results)
+    write_json(out, results)
     print(f"\nruntime {results['runtime_s']:.1f} s; results written to {out}")
 
 

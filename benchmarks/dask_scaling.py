@@ -13,16 +13,17 @@ is the baseline. Figures go to BENCHMARKS.md ("On a Dask cluster").
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import shutil
-import sys
 import tempfile
 import time
 
 import warpsim as ws
 from warpsim import distributed as wd
+from warpsim.export.files import write_json
+from warpsim.machine import machine
+
+from .common import RESULTS
 
 
 def _timed(scene, folder, args, client):
@@ -46,7 +47,8 @@ def main(argv=None) -> int:
     p.add_argument("--every", type=int, default=30)
     p.add_argument("--workers", default="1,2")
     p.add_argument("--shards", type=int, default=8)
-    p.add_argument("--json", default=None)
+    p.add_argument("--json", default=str(RESULTS / "dask_scaling.json"),
+                   help="JSON results (default: benchmarks/results/dask_scaling.json)")
     args = p.parse_args(argv)
     import distributed
 
@@ -72,11 +74,9 @@ def main(argv=None) -> int:
                   f"sphere-frames/s ({row['seconds']:.2f} s, {row['workers_used']} used; "
                   f"bits equal to in-process: {same})")
     result = {"scene": args.scene, "n": args.n, "frames": args.frames, "every": args.every,
-              "shards": args.shards, "cpus": os.cpu_count(), "python": sys.version.split()[0],
-              "machine": platform.machine(), "rows": rows}
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(result, f, indent=2)
+              "shards": args.shards, "machine": machine(), "rows": rows}
+    write_json(args.json, result)
+    print(f"results written to {args.json}")
     return 0
 
 

@@ -1,9 +1,10 @@
 """The plain vectorised NumPy sweep: spheres against rounded boxes, the way a Python user would
 write it without Warp. It is the side-by-side baseline of ``python -m benchmarks.sweep``.
 
-Same algorithm as the kernels (the sheet's methods 1 and 2), vectorised over the ``N`` spheres
-with a Python loop over the ``K`` boxes. Per box, in the box's local frame (``a_l = M^T (a - c)``,
-``d_l = M^T v dt``, ``M`` local -> world) and with the Minkowski radius ``R = rb + r``:
+Same algorithm as the kernels (one sweep per box, the first contact over the boxes),
+vectorised over the ``N`` spheres with a Python loop over the ``K`` boxes. Per box, in the box's
+local frame (``a_l = M^T (a - c)``, ``d_l = M^T v dt``, ``M`` local -> world) and with the
+Minkowski radius ``R = rb + r``:
 
 1. a start on or inside the rounded box is a hit at ``t = 0`` iff it moves in (``d . n < 0``);
 2. otherwise the segment against the grown OBB ``[-(h + R), h + R]`` (slab test);

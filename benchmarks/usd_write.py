@@ -6,7 +6,7 @@ One command::
     python benchmarks/usd_write.py --quick    # small sizes (development)
     python benchmarks/usd_write.py --only scenes   # one of the two tables
 
-Prints two tables and writes ``bench-results/usd_write.json``:
+Prints two tables and writes ``benchmarks/results/usd_write.json`` (``--out`` to change it):
 
 1. Writing ``K`` obstacles (a lattice of identical boxes, half of them rounded, and boxes of all
    different shapes) with a small trajectory: seconds to write and to read the boxes back, wall
@@ -20,8 +20,6 @@ Prints two tables and writes ``bench-results/usd_write.json``:
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import tempfile
 import time
 from pathlib import Path
@@ -30,6 +28,10 @@ import numpy as np
 
 import warpsim as ws
 from warpsim.export import estimate_usd_bytes, read_usd_boxes, write_usd
+from warpsim.export.files import write_json
+from warpsim.machine import machine
+
+from .common import RESULTS
 
 FULL_BOXES = (1_000, 3_000, 10_000, 30_000, 100_000)
 QUICK_BOXES = (1_000, 3_000)
@@ -85,19 +87,15 @@ def bench_boxes(counts, folder: Path) -> list[dict]:
 
 
 def bench_scenes(frames: int, folder: Path) -> list[dict]:
-    import inspect
-
-    records_velocity = "velocities" in inspect.signature(ws.Simulator.run).parameters
     rows = []
     for name, _ in ws.list_scenes():
         scene = ws.Scene.load(name)
         swarm = scene.spawn()
         sim = ws.Simulator(scene, swarm)
-        options = {"velocities": True} if records_velocity else {}
-        traj = sim.run(frames, **options)
+        traj = sim.run(frames, velocities=True)
         spinning = bool(scene.friction > 0.0 or np.any(swarm.angular_momentum != 0.0))
         for fmt in ("usdc", "usda"):
-            for velocities in ((False, True) if traj.velocity is not None else (False,)):
+            for velocities in (False, True):
                 path = folder / f"{name}.{fmt}"
                 write_usd(path, scene, traj, velocities=velocities, warn=False)
                 size = path.stat().st_size
@@ -119,7 +117,8 @@ def main(argv=None) -> int:
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes (development)")
     parser.add_argument("--only", choices=("boxes", "scenes"), help="one of the two tables")
-    parser.add_argument("--out", default="bench-results/usd_write.json", help="JSON results")
+    parser.add_argument("--out", default=None, help="JSON results (default: "
+                                                     "benchmarks/results/usd_write.json)")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
@@ -134,14 +133,12 @@ def main(argv=None) -> int:
             scenes = bench_scenes(QUICK_SCENE_FRAMES if args.quick else SCENE_FRAMES, folder)
     from pxr import Usd
 
-    results = {"machine": {"platform": platform.platform(), "python": platform.python_version(),
-                           "numpy": np.__version__, "usd": ".".join(map(str, Usd.GetVersion())),
-                           "warpsim": ws.__version__},
+    results = {"machine": dict(machine(), usd=".".join(map(str, Usd.GetVersion()))),
                "quick": args.quick, "boxes": boxes, "scenes": scenes,
                "runtime_s": time.perf_counter() - start}
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=1))
+    out = Path(args.out) if args.out else RESULTS / (
+        f"usd_write{'-quick' if args.quick else ''}.json")
+    write_json(out, results)
     print(f"\nruntime {results['runtime_s']:.0f} s; results written to {out}")
     return 0
 

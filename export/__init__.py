@@ -14,14 +14,18 @@ _HOMES = {
     "LargeOutputWarning": "usd_write",
     "check_writable": "files",
     "draw_frame": "preview",
+    "estimate_rerun_bytes": "rerun",  # rerun-sdk (the viewer extra) is imported when writing
     "estimate_usd_bytes": "usd_write",
     "half_orientations": "usd_write",
+    "obstacles_from_usd": "stage_in",
     "read_usd": "usd_read",
     "read_usd_boxes": "usd_read",
     "read_usd_frame": "usd_read",
     "render_movie": "movie",  # imageio is an optional extra, imported when a movie is made
     "render_preview": "preview",
     "usd_format": "usd_write",
+    "usd_to_rerun": "rerun",
+    "write_rerun": "rerun",
     "write_usd": "usd_write",
 }
 

@@ -1,9 +1,11 @@
 """Output files: check a destination before a long computation, then write it atomically (under a
-temporary name in the target folder, renamed over the target in one step)."""
+temporary name in the target folder, renamed over the target in one step). The one atomic writer
+of the package and its studies; standard library only (importing it never loads pxr)."""
 
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import secrets
 from collections.abc import Iterator
@@ -88,3 +90,18 @@ def atomic_output(path: Path) -> Iterator[Path]:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
         raise
+
+
+def write_bytes(path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (:func:`atomic_output`), creating its folder."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_output(path) as tmp:
+        tmp.write_bytes(data)
+    return path
+
+
+def write_json(path, data) -> Path:
+    """Write ``data`` as indented JSON (numpy scalars as floats) to ``path`` atomically,
+    creating its folder."""
+    return write_bytes(path, (json.dumps(data, indent=1, default=float) + "\n").encode())

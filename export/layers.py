@@ -52,7 +52,16 @@ from pxr import Sdf, Tf, Usd, UsdGeom, Vt
 from ..trajectory import Trajectory
 from .files import atomic_output
 from .usd_read import instancer_state, recorded_frames, sphere_radii
-from .usd_write import DEGREES_PER_RADIAN, PROTOTYPE, SPHERES, WORLD, half_orientations, write_usd
+from .usd_write import (
+    DEGREES_PER_RADIAN,
+    PROTOTYPE,
+    SPHERES,
+    WORLD,
+    export_layer,
+    half_orientations,
+    pxr_message,
+    write_usd,
+)
 
 SPHERE_SHAPES = f"{WORLD}/SphereShapes"
 SPHERE_SHAPE = f"{SPHERE_SHAPES}/CheckerBall"
@@ -200,22 +209,8 @@ def write_shard_layer(path, trajectory: Trajectory, ids, index: int, count: int,
                 layer.SetTimeSample(paths["angularVelocities"], time,
                                     Vt.Vec3fArray.FromNumpy(angular[row]))
     with atomic_output(path) as tmp:
-        _export(layer, tmp)
+        export_layer(layer, tmp)
     return digest
-
-
-def _export(layer: Sdf.Layer, path: Path) -> None:
-    try:
-        ok = layer.Export(str(path))
-    except Tf.ErrorException as exc:
-        raise OSError(f"USD could not write {str(path)!r}: {_first_line(exc)}") from None
-    if not ok:
-        raise OSError(f"USD could not write {str(path)!r}")
-
-
-def _first_line(exc: Exception) -> str:
-    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
-    return lines[-1] if lines else type(exc).__name__
 
 
 def shard_manifest(path) -> dict | None:
@@ -277,7 +272,7 @@ def write_root_stage(path, scene, frames, dt: float, layers, manifest: dict) -> 
         f"dt = {float(dt)!r} s, spheres in {len(layers)} shard layers composed as sublayers "
         f"(warpsim.distributed).")
     with atomic_output(path) as tmp:
-        _export(layer, tmp)
+        export_layer(layer, tmp)
     return path
 
 
@@ -343,7 +338,7 @@ def read_sharded_usd(path) -> Trajectory:
     try:
         stage = Usd.Stage.Open(str(path), load=Usd.Stage.LoadAll)
     except Tf.ErrorException as exc:
-        raise ValueError(f"USD could not read {str(path)!r}: {_first_line(exc)}") from None
+        raise ValueError(f"USD could not read {str(path)!r}: {pxr_message(exc)}") from None
     instancers = shard_instancers(stage)
     if not instancers:
         raise ValueError(f"{str(path)!r} has no shard instancers under {SPHERES}")

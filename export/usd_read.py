@@ -14,6 +14,7 @@ from pxr import Gf, Sdf, Tf, Usd, UsdGeom
 
 from ..obstacles import RoundedBoxes
 from ..trajectory import Trajectory
+from .origins import ORIGIN_OP
 from .usd_write import DEGREES_PER_RADIAN, OBSTACLES, SPHERES, WORLD, pxr_message
 
 
@@ -32,6 +33,12 @@ def _open_layer(path) -> Sdf.Layer:
 
 def _stage_of(layer: Sdf.Layer, path, spheres_only: bool = False) -> Usd.Stage:
     try:
+        if layer.subLayerPaths:  # a result composed over a set: its relative sublayer paths
+            # resolve against the file, not against an anonymous copy of it
+            cached = Sdf.Layer.Find(str(path))
+            if cached is not None:
+                cached.Reload()
+            layer = Sdf.Layer.FindOrOpen(str(path))
         if spheres_only:
             return Usd.Stage.OpenMasked(layer, Usd.StagePopulationMask([SPHERES]))
         return Usd.Stage.Open(layer)
@@ -81,11 +88,15 @@ def _vec3_at(attr: Usd.Attribute, time: Usd.TimeCode, n: int) -> np.ndarray | No
 
 
 def instancer_state(instancer: UsdGeom.PointInstancer, frame: int) -> dict[str, np.ndarray]:
-    """What is stored at ``frame``: ``position`` (N, 3) float32 [m], ``orientation`` (N, 4)
+    """What is stored at ``frame``: ``position`` (N, 3) float32 [m] (float64 when the file
+    stores offsets from a per-frame origin, :mod:`warpsim.export.origins`), ``orientation`` (N, 4)
     float32 (x, y, z, w), and when authored ``velocity`` (N, 3) float32 [m/s] and
     ``angular_velocity`` (N, 3) float64 [rad/s]."""
     time = Usd.TimeCode(float(frame))
     position = np.asarray(instancer.GetPositionsAttr().Get(time), dtype=np.float32).reshape(-1, 3)
+    origin = instancer.GetPrim().GetAttribute(ORIGIN_OP)
+    if origin and origin.HasAuthoredValue():  # float32 offsets from a float64 origin: exact sum
+        position = np.asarray(origin.Get(time), dtype=np.float64) + position.astype(np.float64)
     n = position.shape[0]
     attr = instancer.GetOrientationsfAttr()
     if not attr.HasAuthoredValue():

@@ -18,7 +18,11 @@ What is stored, and at which precision (:func:`warpsim.export.usd_read.read_usd`
 this):
 
 - ``positions`` (point3f[], time-sampled): sphere centres [m] in float32. Reading gives
-  ``position.astype(float32)`` bit for bit.
+  ``position.astype(float32)`` bit for bit. A float64 run far from the origin stores them
+  relative to a per-frame double-precision origin instead (the instancer's time-sampled
+  ``xformOp:translate:warpsimOrigin``, :mod:`warpsim.export.origins`): each position keeps
+  ``2^-16`` of the swarm's extent (rounded up to a power of two, at least 1 m) or better
+  wherever the swarm is; reading gives the exact float64 sum.
 - ``orientationsf`` (quatf[], time-sampled): orientations body -> world in float32, read back bit
   for bit as ``orientation.astype(float32)`` in warpsim's ``(x, y, z, w)`` order. USD itself
   (usdview, Houdini, Omniverse) takes ``orientationsf`` over ``orientations`` when both are
@@ -70,6 +74,7 @@ from ..obstacles import RoundedBoxes
 from ..trajectory import Trajectory
 from .files import atomic_output
 from .mesh import box_mesh, checker_sphere_mesh, rounded_box_mesh
+from .origins import ORIGIN_OP, frame_origins
 
 WORLD = "/World"
 LOOKS = "/World/Looks"
@@ -408,6 +413,11 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
         attrs["velocities"] = instancer.CreateVelocitiesAttr()
     if angular is not None:
         attrs["angularVelocities"] = instancer.CreateAngularVelocitiesAttr()
+    origins = frame_origins(trajectory.position, rows, idx)  # [m], far from 0 (origins.py)
+    if origins.any():
+        attrs["origin"] = instancer.GetPrim().CreateAttribute(ORIGIN_OP,
+                                                              Sdf.ValueTypeNames.Double3)
+        instancer.CreateXformOpOrderAttr(Vt.TokenArray([ORIGIN_OP]))
     paths = {name: attr.GetPath() for name, attr in attrs.items()}
     layer = stage.GetRootLayer()
     frames = np.asarray(trajectory.frame, dtype=np.int64)
@@ -420,10 +430,13 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
     # so the numpy rows go in unchanged (the Gf constructors, by contrast, take the real first).
     previous = None
     with Sdf.ChangeBlock():
-        for row in rows:
+        for row, origin in zip(rows, origins, strict=True):
             time = float(frames[row])
             q = np.asarray(trajectory.orientation[row])[idx]
-            layer.SetTimeSample(paths["positions"], time, vec3(trajectory.position[row][idx]))
+            if "origin" in paths:
+                layer.SetTimeSample(paths["origin"], time, Gf.Vec3d(*origin.tolist()))
+            layer.SetTimeSample(paths["positions"], time,
+                                vec3(trajectory.position[row][idx] - origin))
             # Each precision rounded from the source values (no double rounding via float32).
             layer.SetTimeSample(paths["orientationsf"], time, Vt.QuatfArray.FromNumpy(
                 np.ascontiguousarray(q, dtype=np.float32).reshape(n, 4)))
@@ -436,7 +449,7 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
                 layer.SetTimeSample(paths["angularVelocities"], time, vec3(degrees))
 
 
-def _export_layer(layer: Sdf.Layer, path: Path) -> None:
+def export_layer(layer: Sdf.Layer, path: Path) -> None:
     """Write ``layer`` to ``path``, in the format named by its extension."""
     try:
         ok = layer.Export(str(path))
@@ -460,7 +473,9 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
         path: output file; ``.usda`` (text) or ``.usdc`` (binary), any case. Its folder must
             exist.
         scene: the :class:`warpsim.Scene` simulated (its boxes are written once, never per frame),
-            or its :class:`warpsim.RoundedBoxes`, or None to write the spheres alone.
+            or its :class:`warpsim.RoundedBoxes`, or None to write the spheres alone. Boxes read
+            from a USD stage are not written: the result composes over that stage
+            (:mod:`warpsim.export.compose`).
         trajectory: the recorded frames; time codes are its integer ``frame`` indices.
         stride: keep every ``stride``-th recorded frame (rows 0, stride, 2 stride, ...) and the
             last one, as ``Simulator.run(every=...)`` does; >= 1.
@@ -494,6 +509,9 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
     frames = np.asarray(trajectory.frame, dtype=np.int64)[rows]
     dt = float(trajectory.dt)
     boxes = None if scene is None else (scene if isinstance(scene, RoundedBoxes) else scene.boxes)
+    over = getattr(boxes, "stage", None)  # boxes read from a USD stage: compose over it
+    if over is not None:  # (export/compose.py), the set drawing them
+        boxes = None
 
     if warn:
         q = np.asarray(trajectory.orientation)
@@ -532,8 +550,13 @@ def write_usd(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=N
     _author_spheres(stage, trajectory, rows, idx, velocities)
     _author_sphere_prototype(stage, light, dark)
 
+    layer = stage.GetRootLayer()
+    if over is not None:
+        from .compose import over_set
+
+        layer = over_set(layer, over, path, SPHERES)
     with atomic_output(path) as tmp:
-        _export_layer(stage.GetRootLayer(), tmp)
+        export_layer(layer, tmp)
     return path
 
 

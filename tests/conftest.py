@@ -1,23 +1,8 @@
-"""Shared fixtures: the devices to test on and a tolerance table per precision."""
+"""Shared fixtures: the devices to test on and a tolerance table per precision (their values
+are in ``helpers``, which tests import directly)."""
 
-import numpy as np
 import pytest
-import warp as wp
-
-import warpsim  # noqa: F401  (sets Warp's log level before anything initialises it)
-
-wp.init()
-
-DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
-
-#: Tolerances per precision. ``rel``: relative error of a computed length against a float64
-#: reference at unit scale (a few hundred ulps: the sweep chains ~20 roundings through a square
-#: root); ``t_abs``: absolute error of a contact fraction ``t``; ``unit``: deviation of a unit
-#: vector's length; ``angle``: normal direction error [rad].
-TOLERANCES = {
-    "float32": {"rel": 2e-5, "t_abs": 2e-5, "unit": 1e-6, "angle": 2e-3},
-    "float64": {"rel": 1e-11, "t_abs": 1e-11, "unit": 1e-13, "angle": 1e-7},
-}
+from helpers import DEVICES, TOLERANCES
 
 
 @pytest.fixture(params=DEVICES)
@@ -36,41 +21,12 @@ def tol(precision):
     return TOLERANCES[precision]
 
 
-def np_dtype(precision: str):
-    return np.float32 if precision == "float32" else np.float64
+#: Modules whose import alone is slow (they build every kernel variant while being collected):
+#: the fast tier (``-m "not slow"``) does not collect them; the full suite does.
+SLOW_TO_COLLECT = {"test_kernel_variants.py"}
 
 
-def closed_room(half: float, thickness: float = 0.5, center=(0.0, 0.0, 0.0)):
-    """Six sharp walls whose inner faces are the planes ``center +- half`` on each axis.
-
-    Each wall overhangs the room by ``thickness`` on its four sides, so everywhere a sphere
-    inside can touch it is the middle of a face (no edge, no corner of a wall is reachable).
-    """
-    import warpsim as ws
-
-    centers, halves = [], []
-    for axis in range(3):
-        for side in (-1.0, 1.0):
-            c = np.array(center, dtype=np.float64)
-            c[axis] += side * (half + thickness)
-            h = np.full(3, half + 2.0 * thickness)
-            h[axis] = thickness
-            centers.append(c)
-            halves.append(h)
-    return ws.RoundedBoxes(center=centers, half_extents=halves)
-
-
-def shaped_half_extents(rng, kind: str, low: float, high: float) -> np.ndarray:
-    """Random core half extents in [low, high] for a box ``kind``: "box" (all > 0), "plate"
-    (one zero), "stick" (two zeros), "point" (all zero) or "cube" (all equal)."""
-    h = rng.uniform(low, high, 3)
-    if kind == "plate":
-        h[rng.integers(3)] = 0.0
-    elif kind == "stick":
-        h[rng.choice(3, 2, replace=False)] = 0.0
-    elif kind == "point":
-        h[:] = 0.0
-    elif kind == "cube":
-        h[:] = h[0]
-    return h
-
+def pytest_ignore_collect(collection_path, config):
+    if collection_path.name in SLOW_TO_COLLECT and config.getoption("markexpr") == "not slow":
+        return True
+    return None

@@ -1,6 +1,6 @@
 """Independent float64 references for a sphere swept against rounded boxes (test support only).
 
-The kernels follow the sheet's method (grown OBB, face Voronoi test of the entry point, then one
+The kernels' method (grown OBB, face Voronoi test of the entry point, then one
 or three edge capsules). The references here deliberately take other routes, so that a bug in
 that chain shows up as a disagreement:
 
@@ -464,7 +464,8 @@ def reflect_reference(vector, normal) -> np.ndarray:
 
 
 def bounce_reference(position, velocity, radius, boxes: RoundedBoxes, dt: float) -> dict:
-    """The full single-bounce result of the contract for ``N`` spheres (sheet methods 1 and 2).
+    """The full single-bounce result of the contract for ``N`` spheres (one box, and the first
+    contact over many).
 
     The centre would travel ``a -> b = a + v dt``. With a hit at ``t`` and normal ``n``: the
     contact centre ``a + t (b - a)``, ``v' = v - 2 (v . n) n``, and the new position

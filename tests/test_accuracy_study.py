@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import closed_room
+from helpers import closed_room, with_velocity
 
 import warpsim as ws
 from warpsim.analysis import accuracy, error_report, reference
@@ -36,7 +36,7 @@ def measured_order(scene, swarm, rates) -> tuple[float, list[float]]:
         dt = 1.0 / rate
         times = np.arange(rate + 1) * dt
         start = error_report.initial_velocity(swarm, dt, g, "linear")
-        ref = reference.simulate(scene, error_report._with_velocity(swarm, start), 1.0, times)
+        ref = reference.simulate(scene, with_velocity(swarm, start), 1.0, times)
         bounced = np.unique(ref.events.bounces().sphere)
         assert len(bounced) == len(ref.incomplete)  # every sphere bounces
         sim = ws.Simulator(scene, swarm, dt=dt, precision="float64")
@@ -46,6 +46,7 @@ def measured_order(scene, swarm, rates) -> tuple[float, list[float]]:
     return float(np.polyfit(np.log(dts), np.log(errors), 1)[0]), errors
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("correction", [False, True], ids=["no-reset", "reset"])
 def test_float64_kernels_converge_to_the_reference_in_dt(correction):
     scene = non_chaotic_scene(correction)
@@ -61,6 +62,7 @@ def test_float64_kernels_converge_to_the_reference_in_dt(correction):
     assert errors[0] < 0.05  # 1/60 s: millimetres after a second of bounces, not metres
 
 
+@pytest.mark.slow
 def test_accuracy_quick_end_to_end_writes_json_and_plots(tmp_path):
     scene_file = tmp_path / "box.toml"
     scene_file.write_text("""

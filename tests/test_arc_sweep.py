@@ -19,7 +19,7 @@ from arc_reference import (
     arc_point,
     signed_distance,
 )
-from conftest import shaped_half_extents
+from helpers import shaped_half_extents
 
 import warpsim as ws
 from warpsim.kernels.data import model_structs
@@ -320,6 +320,7 @@ def closest_approach(a, v, g, tau, h, radius):
     return float(min(f.min(), signed_distance(arc_point(a, v, g, 0.5 * (lo + hi)), h, radius)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("speed", [1.0, 1e3, 1e-3], ids=["normal", "fast", "slow"])
 def test_random_arcs_match_reference(speed, precision):
     """Random boxes (boxes, plates, sticks, points; sharp and rounded), starts outside, any
@@ -361,6 +362,7 @@ def test_random_arcs_match_reference(speed, precision):
     assert checked_hits >= 15
 
 
+@pytest.mark.slow
 def test_reference_methods_agree():
     """The two references agree wherever the arc passes clear of grazing (self-check)."""
     rng = np.random.default_rng(5)
@@ -457,6 +459,7 @@ def test_bvh_is_bit_identical_to_brute_force(precision):
     np.testing.assert_array_equal(out["brute_box"][hit], first[hit])
 
 
+@pytest.mark.slow
 def test_reject_never_drops_a_hit():
     """The per-box reject (chord box grown by the sagitta) against the reference sweep of the
     same arc in the box's frame: every clear reference hit is found (float64)."""

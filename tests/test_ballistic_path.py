@@ -13,7 +13,7 @@ from functools import cache
 import numpy as np
 import pytest
 import warp as wp
-from conftest import closed_room
+from helpers import closed_room
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from test_arc_sweep import device_boxes
@@ -158,6 +158,7 @@ def closed_form(x, v, t):
     return np.stack([xs, ys, zs], axis=1), np.stack([vx, vy, vz], axis=1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", [1.0 / 30.0, 1.0 / 240.0], ids=["dt30", "dt240"])
 def test_room_against_closed_form(dt, precision):
     """Floor and two pairs of walls: after 1 s the state is the closed-form reflection of the
@@ -175,6 +176,7 @@ def test_room_against_closed_form(dt, precision):
     np.testing.assert_allclose(out["velocity"], v_ref, atol=POSITION_TOL[precision] * 50)
 
 
+@pytest.mark.slow
 def test_energy_conserved_without_correction(precision):
     """Retention 1, no energy reset: 2000 frames of bouncing keep ``1/2 m v^2 + m g y`` to
     float precision (the physics conserves it; what drifts is rounding)."""
@@ -218,6 +220,7 @@ def test_sphere_slides_down_a_slope(precision):
                                atol=tol * 10)
 
 
+@pytest.mark.slow
 def test_lossy_ball_comes_to_rest_without_capping():
     """Retention 0.5 (and spin): hops shrink, then a support; never the cap, never inside the
     floor, the energy never rises and ends at rest on the floor."""
@@ -235,6 +238,7 @@ def test_lossy_ball_comes_to_rest_without_capping():
     assert np.abs(out["angular_momentum"]).max() > 0.0
 
 
+@pytest.mark.slow
 def test_point_never_crosses_a_plate(precision):
     """R = 0 against a zero-thickness plate, elastic: points dropped on it bounce on it forever
     (never below it while over it)."""
@@ -279,6 +283,7 @@ def tilted_plates():
     return ws.RoundedBoxes.concatenate([plates, floor])
 
 
+@pytest.mark.slow
 def test_error_does_not_depend_on_dt(precision):
     """Dropped onto tilted rounded plates (faces, rounded edges): the state after 1 s is the
     same at four step sizes, and nobody is ever inside a box."""
@@ -300,6 +305,7 @@ def test_error_does_not_depend_on_dt(precision):
         assert np.median(err) <= 5e-5 and err.max() <= 5e-3
 
 
+@pytest.mark.slow
 def test_lossy_ball_settles_in_a_valley():
     """Two slopes meeting in a crease, retention 0.5: the second support makes the sphere slide
     along the crease (here level), so it comes to rest there; never the cap, never inside."""
@@ -322,6 +328,7 @@ def test_lossy_ball_settles_in_a_valley():
     np.testing.assert_array_equal(out["velocity"], 0.0)
 
 
+@pytest.mark.slow
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), retention=st.sampled_from([1.0, 0.5]),
        dt=st.sampled_from([1 / 30, 1 / 60, 1 / 240]))

@@ -36,6 +36,7 @@ def exact():
     return reference.simulate(scene, swarm, 0.5, times=[0.5])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", [1 / 30, 1 / 240])
 def test_positions_agree_with_the_exact_motion_at_any_step(device, exact, precision, dt):
     scene, swarm = tilted_plates(), drop_swarm()
@@ -72,6 +73,7 @@ def test_first_contact_times_agree_to_float_precision(device, exact, precision):
     assert checked >= 24
 
 
+@pytest.mark.slow
 def test_final_positions_do_not_depend_on_the_step(device, precision):
     scene, swarm = tilted_plates(), drop_swarm(n=32, seed=7)
     finals = []
@@ -84,6 +86,7 @@ def test_final_positions_do_not_depend_on_the_step(device, precision):
     assert spread <= (1e-9 if precision == "float64" else 2e-4), spread
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", [1 / 60, 1 / 10])
 def test_free_fall_is_the_parabola_and_the_floor_bounce_is_exact(device, precision, dt):
     """A ball dropped from h onto a floor: the bounce times are t_k = t0 (1 + 2k), and the
@@ -126,13 +129,14 @@ def test_energy_is_kept_without_any_correction(device, precision):
     assert drift.min() >= -1e-3
 
 
-def test_broad_phases_and_workers_are_bit_identical():
+@pytest.mark.slow
+def test_broad_phases_and_workers_are_bit_identical(device):
     scene = ws.Scene.load("galton")
     swarm = scene.spawn(n=500, seed=3)
     states = {}
     for bp, workers in (("brute", 1), ("bvh", 2), ("grid", 2), ("auto", 1)):
         sim = ws.Simulator(scene, swarm, motion="ballistic", broad_phase=bp, workers=workers,
-                           device="cpu")
+                           device=device)
         sim.step(45)
         states[bp] = (sim.state().position, sim.stats.bounces)
     ref = states["brute"]
@@ -141,19 +145,19 @@ def test_broad_phases_and_workers_are_bit_identical():
         assert bounces == ref[1], bp
 
 
-def test_motion_is_a_scene_setting_and_a_simulator_choice(tmp_path):
+def test_motion_is_a_scene_setting_and_a_simulator_choice(device, tmp_path):
     text = ws.Scene.load("wedge").source
     scene_text = open(text).read()
     path = tmp_path / "wedge.toml"
     path.write_text(scene_text.replace("[simulation]", '[simulation]\nmotion = "ballistic"'))
     scene = ws.Scene.load(path)
     assert scene.motion == "ballistic" and scene.energy_correction is False
-    sim = ws.Simulator(scene, scene.spawn(n=10, seed=0), device="cpu")
+    sim = ws.Simulator(scene, scene.spawn(n=10, seed=0), device=device)
     assert sim.motion == "ballistic"
     assert ws.Simulator(scene, scene.spawn(n=10, seed=0), motion="linear",
-                        device="cpu").energy_correction is True
+                        device=device).energy_correction is True
     with pytest.raises(ValueError, match="motion must be one of"):
-        ws.Simulator(scene, scene.spawn(n=10, seed=0), motion="parabola", device="cpu")
+        ws.Simulator(scene, scene.spawn(n=10, seed=0), motion="parabola", device=device)
     bad = tmp_path / "bad.toml"
     bad.write_text(scene_text.replace("[simulation]", '[simulation]\nmotion = "exact"'))
     with pytest.raises(ValueError, match="simulation.motion must be one of"):

@@ -1,4 +1,4 @@
-"""Several bounces in one frame (sheet method 3, ``ws.bounce``) against analytic answers.
+"""Several bounces in one frame (``ws.bounce``) against analytic answers.
 
 Every expected value here is computed in float64 by the test itself, from geometry that has a
 closed form:
@@ -12,7 +12,8 @@ closed form:
 * Built backwards: pick the contact centre ``P`` on a plane with normal ``n``, a displacement
   ``d`` with ``d . n < 0`` and a fraction ``t``; start at ``A = P - t d``. The end is
   ``P + (1 - t) (d - 2 (d . n) n)``.
-* The friction torque of SPEC "Spin", written out in float64 (:func:`friction_spin_reference`).
+* The friction torque at a contact (README "What it models"), written out in float64
+  (:func:`friction_spin_reference`).
 
 Tolerances. A broken line is a chain of straight pieces; each piece rounds a handful of
 coordinates (the contact ``a + t d``, the reflected rest ``(1 - t)(d - 2 (d . n) n)``) at the
@@ -24,7 +25,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import DEVICES, closed_room
+from helpers import DEVICES, closed_room
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
@@ -71,7 +72,7 @@ def reflect(d, n):
 
 
 def friction_spin_reference(L, v, n, r, m, dt, k_f, max_rot):
-    """SPEC "Spin" at one contact, float64: ``I = 2/5 m r^2``, ``Rot = L / I`` clamped,
+    """The spin update at one contact, float64: ``I = 2/5 m r^2``, ``Rot = L / I`` clamped,
     ``OC = -r n``, ``v_t,rel = v - (v.n) n + Rot x OC``, ``L += dt OC x (-k_f v_t,rel)``, then
     ``|L| / I`` clamped again."""
     inertia = 0.4 * m * r * r
@@ -138,6 +139,7 @@ def test_path_in_simple_scenes(case, precision, device):
     assert b.position.dtype == np.dtype(precision)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("precision", ["float32", "float64"])
 @settings(max_examples=150, deadline=None)
@@ -171,7 +173,7 @@ def test_room_end_position_is_the_unfolded_one(device, precision, start, directi
     assert abs(np.linalg.norm(b.velocity[0].astype(np.float64)) - speed) <= 4 * eps * speed
 
 
-def test_room_batch_far_from_origin_matches_unfolding():
+def test_room_batch_far_from_origin_matches_unfolding(device):
     """The same unfolding for a batch of 2000 spheres in a room centred at 1e3 m (float64,
     where 1e3 m costs 10 bits; float32 far from the origin is the sweep tests' business)."""
     rng = np.random.default_rng(5)
@@ -183,7 +185,8 @@ def test_room_batch_far_from_origin_matches_unfolding():
     v *= rng.uniform(0.0, 6.0, (n, 1)) / np.linalg.norm(v, axis=1)[:, None]
     end, sign, folds = unfold(x0 + v, a)
     assert folds.sum(axis=1).max() <= MAX_BOUNCES  # below the cap by construction
-    b = ws.bounce(center + x0, v, r, closed_room(half, center=center), 1.0, precision="float64")
+    b = ws.bounce(center + x0, v, r, closed_room(half, center=center), 1.0, precision="float64",
+                  device=device)
     tol = PIECE_ULPS * EPS["float64"] * (np.abs(center).max() + 7.0) * (MAX_BOUNCES + 1)
     np.testing.assert_array_equal(b.bounces, folds.sum(axis=1))
     np.testing.assert_allclose(b.position - center, end, rtol=0, atol=tol)
@@ -289,13 +292,14 @@ def test_spin_two_contacts_in_one_frame():
     np.testing.assert_allclose(b.position[0], (0.5, 1.0, 0.5), rtol=0, atol=1e-6)
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(q=st.tuples(*[st.floats(-1.0, 1.0)] * 4),
        local_d=st.tuples(st.floats(-2.0, 2.0), st.floats(0.1, 2.0), st.floats(-2.0, 2.0)),
        L0=st.tuples(*[st.floats(-0.05, 0.05)] * 3),
        k_f=st.floats(0.01, 20.0), mass=st.floats(0.5, 4.0), t=st.sampled_from([0.25, 0.5]))
 def test_spin_on_a_rotated_plate_matches_the_formula(q, local_d, L0, k_f, mass, t):
-    """Built backwards on a rotated zero-thickness plate: one contact, L from the SPEC formula
+    """Built backwards on a rotated zero-thickness plate: one contact, L from the torque formula
     (float64 reference), and the clamp holds."""
     q = np.asarray(q)
     assume(np.linalg.norm(q) > 0.1)
@@ -322,10 +326,10 @@ def test_spin_on_a_rotated_plate_matches_the_formula(q, local_d, L0, k_f, mass, 
                                atol=PIECE_ULPS * EPS["float32"] * 10.0 * 2)
 
 
-def test_no_friction_leaves_angular_momentum_untouched():
+def test_no_friction_leaves_angular_momentum_untouched(device):
     L0 = np.array([[0.3, -0.2, 0.1], [1e-3, 5.0, -7.0]])
     b = ws.bounce([(0.0, 0.5, 0.0), (1.0, 0.5, 0.0)], [(4.0, -1.0, 0.0), (-4.0, -1.0, 2.0)],
-                  0.25, FLOOR, 0.5, angular_momentum=L0, friction=0.0)
+                  0.25, FLOOR, 0.5, angular_momentum=L0, friction=0.0, device=device)
     assert b.bounces.tolist() == [1, 1]
     np.testing.assert_array_equal(b.angular_momentum, L0.astype(np.float32))
 
@@ -371,9 +375,10 @@ def test_energy_retention_compounds_over_contacts():
 # -- thin plates at high speed ------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("half_thickness", [0.0, 1e-3])
 @pytest.mark.parametrize("speed", [600.0, 5000.0])
-def test_thin_plate_at_high_speed_is_never_crossed(speed, half_thickness):
+def test_thin_plate_at_high_speed_is_never_crossed(device, speed, half_thickness):
     """A large rotated plate; spheres from both sides, built backwards to hit its face at a
     random fraction of a 10 m (600 m/s) or 83 m (5000 m/s) frame path. Each ends on its own
     side at the reflected position, one contact.
@@ -398,7 +403,7 @@ def test_thin_plate_at_high_speed_is_never_crossed(speed, half_thickness):
     contact = center + np.array([rotate(q, x) for x in local_contact])
     t = rng.uniform(0.0, 1.0, n_spheres)
     start = contact - t[:, None] * d
-    b = ws.bounce(start, d / dt, r, plate, dt)
+    b = ws.bounce(start, d / dt, r, plate, dt, device=device)
     n_world = side[:, None] * normal
     reflected = d - 2.0 * np.einsum("ij,ij->i", d, n_world)[:, None] * n_world
     expected = contact + (1.0 - t)[:, None] * reflected
@@ -413,13 +418,13 @@ def test_thin_plate_at_high_speed_is_never_crossed(speed, half_thickness):
 # -- inputs ------------------------------------------------------------------------------------
 
 
-def test_inputs_not_modified():
+def test_inputs_not_modified(device):
     a = np.array([[0.0, 0.5, 0.0], [0.25, 0.5, 0.0]])
     v = np.array([[4.0, -1.0, 0.0], [-4.0, -1.0, 2.0]])
     L0 = np.array([[0.3, -0.2, 0.1], [0.0, 0.0, 0.0]])
     radius, mass = np.array([0.25, 0.125]), np.array([1.0, 2.0])
     before = [x.copy() for x in (a, v, L0, radius, mass)]
-    ws.bounce(a, v, radius, FLOOR, 0.5, mass=mass, angular_momentum=L0, friction=0.5)
+    ws.bounce(a, v, radius, FLOOR, 0.5, mass=mass, angular_momentum=L0, friction=0.5, device=device)
     for x, y in zip((a, v, L0, radius, mass), before, strict=True):
         np.testing.assert_array_equal(x, y)
 
@@ -439,11 +444,11 @@ def test_inputs_not_modified():
     (dict(angular_momentum=[[0, 0, 0]]), r"angular_momentum must have shape \(4, 3\)"),
     (dict(precision="half"), r"precision must be one of"),
 ])
-def test_bad_input_names_the_field(kwargs, message):
+def test_bad_input_names_the_field(device, kwargs, message):
     args = dict(position=np.zeros((4, 3)), velocity=np.ones((4, 3)), radius=0.1, dt=0.1)
     args.update(kwargs)
     position, velocity, radius, dt = (args.pop(k) for k in ("position", "velocity", "radius",
                                                             "dt"))
     with pytest.raises(ValueError, match=message):
-        ws.bounce(position, velocity, radius, FLOOR, dt, **args)
+        ws.bounce(position, velocity, radius, FLOOR, dt, **args, device=device)
 

@@ -85,13 +85,13 @@ def assert_same(a, b, fields):
 
 @pytest.mark.parametrize("offset", [0.0, 1e4], ids=["origin", "far"])
 @pytest.mark.parametrize("k", [50, 300])
-def test_collide_boxes_bvh_is_bit_identical(k, offset, precision):
+def test_collide_boxes_bvh_is_bit_identical(device, k, offset, precision):
     rng = np.random.default_rng([k, int(offset)])
     boxes, half_region, dup, original = crowded_scene(k, rng, offset)
     pos, vel, rad = swarm_inputs(3000, half_region, rng, offset)
-    brute = ws.collide_boxes(pos, vel, rad, boxes, DT, precision=precision, device="cpu",
+    brute = ws.collide_boxes(pos, vel, rad, boxes, DT, precision=precision, device=device,
                              broad_phase="brute")
-    bvh = ws.collide_boxes(pos, vel, rad, boxes, DT, precision=precision, device="cpu",
+    bvh = ws.collide_boxes(pos, vel, rad, boxes, DT, precision=precision, device=device,
                            broad_phase="bvh")
     assert_same(brute, bvh, CONTACT_FIELDS)
     assert 0.1 < brute.hit.mean() < 0.95  # a crowded scene, not a trivial one
@@ -99,26 +99,27 @@ def test_collide_boxes_bvh_is_bit_identical(k, offset, precision):
     # ties: a duplicate has the same t as its original, lower index, so it never wins
     assert not np.isin(bvh.box, dup).any()
     assert np.isin(bvh.box, original).sum() > 10
-    auto = ws.collide_boxes(pos, vel, rad, boxes, DT, precision=precision, device="cpu")
+    auto = ws.collide_boxes(pos, vel, rad, boxes, DT, precision=precision, device=device)
     assert_same(brute, auto, CONTACT_FIELDS)
 
 
-def test_bounce_bvh_is_bit_identical():
+def test_bounce_bvh_is_bit_identical(device):
     rng = np.random.default_rng(3)
     boxes, half_region, _, _ = crowded_scene(120, rng)
     pos, vel, rad = swarm_inputs(2000, half_region, rng)
-    brute = ws.bounce(pos, vel, rad, boxes, DT, device="cpu", broad_phase="brute")
-    bvh = ws.bounce(pos, vel, rad, boxes, DT, device="cpu", broad_phase="bvh")
+    brute = ws.bounce(pos, vel, rad, boxes, DT, device=device, broad_phase="brute")
+    bvh = ws.bounce(pos, vel, rad, boxes, DT, device=device, broad_phase="bvh")
     assert_same(brute, bvh, ("hit", "bounces", "capped", "position", "velocity",
                              "angular_momentum"))
     assert brute.bounces.max() >= 2
 
 
-def test_simulator_galton_bvh_is_bit_identical():
+@pytest.mark.slow
+def test_simulator_galton_bvh_is_bit_identical(device):
     scene = ws.Scene.load("galton")
     assert len(scene.boxes) >= BVH_MIN_BOXES
     swarm = scene.spawn(n=1000, seed=1)
-    sims = {bp: ws.Simulator(scene, swarm, device="cpu", broad_phase=bp)
+    sims = {bp: ws.Simulator(scene, swarm, device=device, broad_phase=bp)
             for bp in ("brute", "bvh", "grid", "auto")}
     assert {bp: s.broad_phase for bp, s in sims.items() if bp != "auto"} == {
         "brute": "brute", "bvh": "bvh", "grid": "grid-bvh"}
@@ -132,35 +133,37 @@ def test_simulator_galton_bvh_is_bit_identical():
     assert brute.stats.capped == bvh.stats.capped
 
 
-def test_auto_keeps_brute_force_for_few_boxes():
+def test_auto_keeps_brute_force_for_few_boxes(device):
     """Boxes piled in one place: a grid cell near them lists them all, so it buys nothing."""
     boxes = ws.RoundedBoxes(np.zeros((3, 3)), np.full((3, 3), 0.1))
     swarm = ws.Swarm([[0.0, 1.0, 0.0]], [[0.0, 0.0, 0.0]], 0.05)
-    assert ws.Simulator(ws.Scene(boxes), swarm, device="cpu").broad_phase == "brute"
+    assert ws.Simulator(ws.Scene(boxes), swarm, device=device).broad_phase == "brute"
 
 
 @pytest.mark.parametrize("broad_phase", ["brute", "bvh", "auto"])
-def test_no_boxes(broad_phase):
+def test_no_boxes(device, broad_phase):
     empty = ws.RoundedBoxes(np.zeros((0, 3)), np.zeros((0, 3)))
     pos = np.array([[0.0, 1.0, 0.0], [2.0, 0.0, -1.0]])
     vel = np.array([[1.0, 0.0, 0.0], [0.0, -3.0, 0.0]])
-    c = ws.collide_boxes(pos, vel, 0.1, empty, DT, device="cpu", broad_phase=broad_phase)
+    c = ws.collide_boxes(pos, vel, 0.1, empty, DT, device=device, broad_phase=broad_phase)
     assert (c.box == -1).all() and (c.t == 1.0).all()
     lossy = ws.Scene(empty, energy_retention=0.5)  # the galton test's kernels: no new builds
-    sim = ws.Simulator(lossy, ws.Swarm(pos, vel, 0.1), device="cpu", broad_phase=broad_phase)
+    sim = ws.Simulator(lossy, ws.Swarm(pos, vel, 0.1), device=device, broad_phase=broad_phase)
     sim.step(2)
     assert np.isfinite(sim.state().position).all()
 
 
-def test_bad_broad_phase_is_refused():
+def test_bad_broad_phase_is_refused(device):
     box = ws.RoundedBox()
     swarm = ws.Swarm([[0.0, 2.0, 0.0]], [[0.0, 0.0, 0.0]], 0.05)
     with pytest.raises(ValueError, match="broad_phase"):
-        ws.collide_boxes([[0.0, 2.0, 0.0]], [[0.0, -1.0, 0.0]], 0.1, box, DT, broad_phase="bhv")
+        ws.collide_boxes([[0.0, 2.0, 0.0]], [[0.0, -1.0, 0.0]], 0.1, box, DT, broad_phase="bhv",
+                         device=device)
     with pytest.raises(ValueError, match="broad_phase"):
-        ws.bounce([[0.0, 2.0, 0.0]], [[0.0, -1.0, 0.0]], 0.1, box, DT, broad_phase=None)
+        ws.bounce([[0.0, 2.0, 0.0]], [[0.0, -1.0, 0.0]], 0.1, box, DT, broad_phase=None,
+                  device=device)
     with pytest.raises(ValueError, match="broad_phase"):
-        ws.Simulator(ws.Scene(box.as_boxes()), swarm, device="cpu", broad_phase="octree")
+        ws.Simulator(ws.Scene(box.as_boxes()), swarm, device=device, broad_phase="octree")
 
 
 @pytest.mark.parametrize("scale", [1.0, 1e4, 1e-3])

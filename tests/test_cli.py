@@ -15,6 +15,7 @@ def warpsim(*args, cwd=None):
                           capture_output=True, text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_scenes_lists_every_bundled_scene():
     out = warpsim("scenes")
     assert out.returncode == 0, out.stderr
@@ -23,6 +24,7 @@ def test_scenes_lists_every_bundled_scene():
     assert {"room", "galton", "staircase", "pinball", "thin-walls", "wedge", "spin"} <= set(names)
 
 
+@pytest.mark.slow
 def test_run_writes_usd_and_preview_draws_a_frame(tmp_path):
     usd = tmp_path / "wedge.usdc"
     out = warpsim("run", "wedge", "-n", 24, "--frames", 12, "--seed", 5, "-o", usd,
@@ -46,6 +48,7 @@ def test_run_writes_usd_and_preview_draws_a_frame(tmp_path):
         assert image.size == (320, 180)
 
 
+@pytest.mark.slow
 def test_run_every_and_usda(tmp_path):
     usd = tmp_path / "room.usda"
     out = warpsim("run", "room", "-n", 10, "--frames", 9, "--every", 4, "-o", usd,
@@ -54,6 +57,7 @@ def test_run_every_and_usda(tmp_path):
     np.testing.assert_array_equal(ws.export.read_usd(usd).frame, [0, 4, 8, 9])
 
 
+@pytest.mark.slow
 def test_run_default_output_name_in_working_directory(tmp_path):
     out = warpsim("run", "spin", "-n", 4, "--frames", 2, cwd=tmp_path)
     assert out.returncode == 0, out.stderr
@@ -61,6 +65,7 @@ def test_run_default_output_name_in_working_directory(tmp_path):
     assert "frames" in out.stderr  # the progress bar goes to standard error
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args,message", [
     (("run", "no-such-scene"), "unknown scene 'no-such-scene'"),
     (("run", "room", "-n", "-3"), "n must be >= 1"),
@@ -91,6 +96,7 @@ def test_errors_are_one_line_and_nonzero(args, message, tmp_path, capsys, monkey
     assert list(tmp_path.iterdir()) == []  # nothing written, no partial file
 
 
+@pytest.mark.slow
 def test_output_under_a_file_is_refused(tmp_path):
     (tmp_path / "plain").write_text("not a directory")
     out = warpsim("run", "wedge", "-n", 4, "--frames", 2, "-o", tmp_path / "plain" / "w.usdc")
@@ -99,6 +105,7 @@ def test_output_under_a_file_is_refused(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["plain"]
 
 
+@pytest.mark.slow
 def test_unwritable_output_leaves_nothing(tmp_path):
     locked = tmp_path / "locked"
     locked.mkdir()
@@ -113,6 +120,7 @@ def test_unwritable_output_leaves_nothing(tmp_path):
         locked.chmod(0o700)
 
 
+@pytest.mark.slow
 def test_debug_shows_the_traceback(tmp_path):
     out = warpsim("--debug", "run", "no-such-scene", cwd=tmp_path)
     assert out.returncode != 0 and "Traceback" in out.stderr
@@ -238,6 +246,7 @@ def test_preview_movie(tmp_path, capsys):
     assert total == pytest.approx(4 * 2 * 1000 / 60, abs=4 * 10)
 
 
+@pytest.mark.slow
 def test_velocities_and_events_options(tmp_path, capsys):
     """Motion data and contact events: the file holds the simulator's own values."""
     usd = tmp_path / "w.usdc"
@@ -264,6 +273,7 @@ def test_velocities_and_events_options(tmp_path, capsys):
     assert len(ws.ContactEvents.read_parquet(events)) > 0
 
 
+@pytest.mark.slow
 def test_warp_start_up_chatter_is_silenced_and_bad_device_is_one_line(tmp_path):
     out = warpsim("run", "wedge", "-n", 4, "--frames", 2, "-o", tmp_path / "w.usdc",
                   "--no-progress")
@@ -277,6 +287,7 @@ def test_warp_start_up_chatter_is_silenced_and_bad_device_is_one_line(tmp_path):
         assert "device 'cuda' is not available" in one_error_line(out.stderr)
 
 
+@pytest.mark.slow
 def test_forwarded_commands_show_their_own_usage():
     out = warpsim("bench", "--help")
     assert out.returncode == 0, out.stderr
@@ -290,3 +301,13 @@ def test_accuracy_is_forwarded():
     with pytest.raises(SystemExit) as info:
         main(["accuracy", "--help"])
     assert info.value.code == 0
+
+
+@pytest.mark.slow
+def test_python_dash_m_warpsim_is_the_command_line():
+    from warpsim import __version__
+
+    out = subprocess.run([sys.executable, "-m", "warpsim", "--version"], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == f"warpsim {__version__}"

@@ -74,6 +74,7 @@ def run(scene, path, **kw):
 
 # --- the sharded draw ---------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_block_seeds_are_distinct_and_in_range():
     blocks = np.arange(1 << 13)
     for seed in (0, 1, 2**31 - 1):
@@ -113,6 +114,7 @@ def test_plan_shards_covers_the_swarm_in_whole_blocks():
 
 # --- in this process ----------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_in_process_shards_equal_one_simulator(scene, reference, tmp_path):
     out = tmp_path / "run.usda"
     summary = run(scene, out, shards=3, velocities=True)
@@ -144,6 +146,7 @@ def test_bad_arguments_fail_before_any_work(scene, tmp_path, kw, message):
 
 # --- on a LocalCluster of two processes ---------------------------------------------------------
 
+@pytest.mark.slow
 def test_cluster_stage_equals_one_process_bit_for_bit(scene, reference, client, tmp_path):
     out = tmp_path / "run.usdc"
     summary = run(scene, out, client=client, shards=4)
@@ -176,6 +179,7 @@ def test_cluster_stage_equals_one_process_bit_for_bit(scene, reference, client, 
     assert stage.GetTimeCodesPerSecond() == pytest.approx(1.0 / scene.dt)
 
 
+@pytest.mark.slow
 def test_other_shard_counts_give_the_same_bits(scene, reference, client, tmp_path):
     for shards in (1, 5):
         out = tmp_path / f"run{shards}.usdc"
@@ -183,6 +187,7 @@ def test_other_shard_counts_give_the_same_bits(scene, reference, client, tmp_pat
         assert_same_as_reference(wd.read(out), reference)
 
 
+@pytest.mark.slow
 def test_rerun_recomputes_only_missing_and_stale_shards(scene, reference, client, tmp_path):
     out = tmp_path / "run.usdc"
     first = run(scene, out, client=client, shards=5)
@@ -208,6 +213,7 @@ def test_rerun_recomputes_only_missing_and_stale_shards(scene, reference, client
     assert "3 of 5 shards recomputed, 2 reused" in str(second)
 
 
+@pytest.mark.slow
 def test_cli_runs_on_a_scheduler_address(client, tmp_path, capsys):
     from warpsim.apps.cli import main
 
@@ -224,6 +230,7 @@ def _mean_radius(name):
     return float(ws.Scene.load(name).spawn(n=16, seed=0).radius.mean())
 
 
+@pytest.mark.slow
 def test_sweep_runs_items_as_tasks_in_order(client):
     names = ["room", "galton", "pinball"]
     assert wd.sweep(_mean_radius, names, client=client, progress=False) == \
@@ -251,6 +258,7 @@ def test_address_forms():
     assert wd.scheduler_address("[::1]:9000") == "tcp://[::1]:9000"
 
 
+@pytest.mark.slow
 def test_unreachable_scheduler_is_a_one_line_error(scene, tmp_path):
     pytest.importorskip("distributed")
     with socket.socket() as s:  # a port nobody listens on
@@ -272,6 +280,7 @@ def test_missing_dask_names_the_extra(monkeypatch):
 
 # --- faults (last: it leaves the cluster a worker short while its nanny restarts it) ---------
 
+@pytest.mark.slow
 def test_a_killed_worker_loses_only_its_task(scene, client, tmp_path):
     """Shards long enough (over half a second each) that a worker is killed while running one;
     Dask runs the lost shard again on a live worker, and the output is the same. Last in the

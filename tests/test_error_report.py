@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import closed_room
+from helpers import closed_room, with_velocity
 
 import warpsim as ws
 from warpsim.analysis import error_report, reference
@@ -19,12 +19,12 @@ def floor_scene(**kw):
                     **kw)
 
 
-def test_free_flight_has_no_error_but_rounding():
+def test_free_flight_has_no_error_but_rounding(device):
     """From v + g dt / 2 at t = 0, semi-implicit Euler hits the parabola at every frame."""
     scene = floor_scene()
     swarm = ws.Swarm(position=[[0.0, 5.0, 0.0], [1.0, 8.0, 0.0]],
                      velocity=[[1.0, 2.0, 0.0], [-0.5, 0.0, 0.3]], radius=0.05)
-    sim = ws.Simulator(scene, swarm, dt=1 / 60, precision="float64")
+    sim = ws.Simulator(scene, swarm, dt=1 / 60, precision="float64", device=device)
     sim.run(30)  # 0.5 s: no sphere reaches the floor
     rep = error_report.compare(sim, scene, swarm, sample=2)
     assert rep.horizon == pytest.approx(0.5)
@@ -36,7 +36,8 @@ def test_free_flight_has_no_error_but_rounding():
     assert rep.settings["convention_offset_m_per_s"] == pytest.approx(0.5 * G / 60)
 
 
-def test_floor_bounce_contact_time_and_error_figures():
+@pytest.mark.slow
+def test_floor_bounce_contact_time_and_error_figures(device):
     """A ball dropped from h: contact at sqrt(2 h / g); the linear model's chord sweep finds it
     within a frame; every figure is present, finite and JSON-ready."""
     h, r = 1.2, 0.05
@@ -45,14 +46,14 @@ def test_floor_bounce_contact_time_and_error_figures():
     swarm = ws.Swarm(position=np.stack([xs, np.full(6, h + r), np.zeros(6)], axis=1),
                      velocity=np.zeros((6, 3)), radius=r)
     dt = 1 / 120
-    sim = ws.Simulator(scene, swarm, dt=dt, precision="float64")
+    sim = ws.Simulator(scene, swarm, dt=dt, precision="float64", device=device)
     sim.run(round(1.0 / dt))
     rep = error_report.compare(sim, scene, swarm, sample=4, seed=3)
     assert len(rep.sample) == 4 and len(set(rep.sample.tolist())) == 4
     c = rep.contacts
     assert c["compared"] == 4 and c["mismatched_spheres"] == 0
     # the reference's own contact is at the analytic time (start velocity g dt / 2 downwards)
-    ref = reference.simulate(scene, error_report._with_velocity(
+    ref = reference.simulate(scene, with_velocity(
         swarm, error_report.initial_velocity(swarm, dt, scene.gravity, "linear")), 1.0)
     u0 = 0.5 * G * dt
     t_hit = (-u0 + np.sqrt(u0 ** 2 + 2 * G * h)) / G
@@ -71,12 +72,13 @@ def test_floor_bounce_contact_time_and_error_figures():
     json.dumps(rep.to_dict(), allow_nan=False)
 
 
-def test_lossy_run_is_judged_by_energy_against_the_reference():
+@pytest.mark.slow
+def test_lossy_run_is_judged_by_energy_against_the_reference(device):
     h, r = 1.0, 0.05
     scene = floor_scene(energy_retention=0.7)
     swarm = ws.Swarm(position=[[0.0, h + r, 0.0], [0.5, h + r, 0.0]], velocity=np.zeros((2, 3)),
                      radius=r)
-    sim = ws.Simulator(scene, swarm, dt=1 / 120, precision="float64")
+    sim = ws.Simulator(scene, swarm, dt=1 / 120, precision="float64", device=device)
     sim.run(120)
     rep = error_report.compare(sim, scene, swarm, sample=2)
     assert rep.invariants["energy_drift_max"] is None  # lost by design: no drift to speak of
@@ -84,12 +86,12 @@ def test_lossy_run_is_judged_by_energy_against_the_reference():
     assert "energy drift" not in rep.summary()
 
 
-def test_trajectory_input_gives_the_same_position_errors():
+def test_trajectory_input_gives_the_same_position_errors(device):
     scene = ws.Scene(closed_room(1.0))
     rng = np.random.default_rng(1)
     swarm = ws.Swarm(position=rng.uniform(-0.5, 0.5, (8, 3)),
                      velocity=rng.normal(0, 2.0, (8, 3)), radius=0.05)
-    sim = ws.Simulator(scene, swarm, dt=1 / 60, precision="float64")
+    sim = ws.Simulator(scene, swarm, dt=1 / 60, precision="float64", device=device)
     traj = sim.run(60)
     from_sim = error_report.compare(sim, scene, swarm, sample=5, seed=2)
     from_traj = error_report.compare(traj, scene, swarm, sample=5, seed=2)
@@ -119,20 +121,22 @@ def test_contacts_from_frames_of_a_linear_bounce():
     np.testing.assert_allclose(found.fraction, [tau / dt], atol=1e-12)
 
 
-def test_bad_arguments():
+@pytest.mark.slow
+def test_bad_arguments(device):
     scene = floor_scene()
     swarm = ws.Swarm(position=[[0.0, 1.0, 0.0]], velocity=[[0.0, 0.0, 0.0]])
     with pytest.raises(ValueError, match="sample"):
-        error_report.compare(ws.Simulator(scene, swarm), scene, swarm, sample=0)
+        error_report.compare(ws.Simulator(scene, swarm, device=device), scene, swarm, sample=0)
     with pytest.raises(ValueError, match="sim_or_trajectory"):
         error_report.compare("run", scene, swarm)
-    sim = ws.Simulator(scene, swarm)
+    sim = ws.Simulator(scene, swarm, device=device)
     traj = sim.run(10, every=2)
     with pytest.raises(ValueError, match="every frame"):
         error_report.compare(traj, scene, swarm)
 
 
-def test_ballistic_run_agrees_with_the_reference_at_every_step_size():
+@pytest.mark.slow
+def test_ballistic_run_agrees_with_the_reference_at_every_step_size(device):
     """The exact-arc model is the reference's physics per frame: in float64 its positions after
     0.5 s in the standard room agree to far below a micrometre at dt = 1/30 s and 1/240 s
     alike (issue 9's figure), and its contact times to far below a microsecond."""
@@ -140,7 +144,8 @@ def test_ballistic_run_agrees_with_the_reference_at_every_step_size():
     swarm = scene.spawn(n=24, seed=5)
     for dt in (1 / 30, 1 / 240):
         try:
-            sim = ws.Simulator(scene, swarm, dt=dt, precision="float64", motion="ballistic")
+            sim = ws.Simulator(scene, swarm, dt=dt, precision="float64", motion="ballistic",
+                               device=device)
         except TypeError:
             pytest.skip("this warpsim.Simulator has no motion='ballistic'")
         sim.run(round(0.5 / dt))

@@ -6,7 +6,7 @@ points built backwards from a chosen contact), never from the code under test.
 
 import numpy as np
 import pytest
-from conftest import closed_room
+from helpers import closed_room
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -197,6 +197,7 @@ def period_of(gap, speed):
     return gap / speed
 
 
+@pytest.mark.slow
 def test_energy_constant_over_10_s_in_a_closed_room():
     room = closed_room(1.0)
     inner = ws.RoundedBoxes(center=[[0.1, -0.2, 0.05]], half_extents=[[0.3, 0.0, 0.25]],
@@ -312,6 +313,7 @@ def test_ball_put_on_a_floor_rests(far):
     np.testing.assert_array_equal(run.position[:, 0], [[far, 0.1, -far]] * 2)
 
 
+@pytest.mark.slow
 def test_slipping_off_a_rounded_edge_leaves_near_the_analytic_angle():
     """Frictionless sliding over a cylinder of radius R from its top at speed v0 leaves the
     surface where cos(theta) = (v0^2 / (g R) + 2) / 3. The reference follows curved supports
@@ -352,6 +354,7 @@ def test_bad_input_names_the_field():
         reference.simulate(scene, one([0, -0.5, 0], [0, 0, 0]), 1.0)
 
 
+@pytest.mark.slow
 @settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**31 - 1), lossy=st.booleans())
 def test_nobody_inside_and_energy_never_gained(seed, lossy):
@@ -372,6 +375,7 @@ def test_nobody_inside_and_energy_never_gained(seed, lossy):
         np.testing.assert_allclose(e, np.broadcast_to(e[0], e.shape), rtol=ENERGY_REL_TOL)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["galton", "staircase", "wedge"])
 def test_bundled_lossy_and_crowded_scenes_stay_sane(name):
     """Lossy contacts, pegs (curved supports), many bounces in a V: no NaN, nobody given up,

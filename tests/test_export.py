@@ -367,7 +367,7 @@ def partial_then_fail(layer, path):
 
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_failed_write_leaves_nothing(tmp_path, monkeypatch, fmt):
-    monkeypatch.setattr(usd_module, "_export_layer", partial_then_fail)
+    monkeypatch.setattr(usd_module, "export_layer", partial_then_fail)
     with pytest.raises(OSError, match="disk full"):
         write_usd(tmp_path / f"anim.{fmt}", make_scene(), make_trajectory())
     assert list(tmp_path.iterdir()) == []
@@ -377,7 +377,7 @@ def test_failed_write_keeps_the_existing_file(tmp_path, monkeypatch):
     path = tmp_path / "anim.usdc"
     write_usd(path, None, make_trajectory(seed=1))
     before = path.read_bytes()
-    monkeypatch.setattr(usd_module, "_export_layer", partial_then_fail)
+    monkeypatch.setattr(usd_module, "export_layer", partial_then_fail)
     with pytest.raises(OSError):
         write_usd(path, None, make_trajectory(seed=2))
     assert path.read_bytes() == before
@@ -411,6 +411,7 @@ def test_size_warning_when_estimate_exceeds_max_bytes(tmp_path):
         write_usd(tmp_path / "anim.usdc", None, make_trajectory())  # default: far below 2 GB
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_size_estimate_matches_measured_files(tmp_path, fmt):
     """The calibrated model stays within 15% of real files of another shape than it was fit on."""
@@ -436,12 +437,14 @@ def test_bad_selection_is_refused(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_import_warpsim_does_not_import_pxr():
     code = ("import sys, warpsim; assert 'pxr' not in sys.modules; "
             "warpsim.export.write_usd; assert 'pxr' in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_the_file_helpers_do_not_import_pxr():
     """``warpsim.export.files`` is standard library only: a writer of events or JSON uses it
     without loading USD."""
@@ -489,6 +492,7 @@ def assert_closed_oriented_manifold(points, counts, indices):
     assert np.unique(indices).size == len(points)  # no unused vertex
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(h=st.tuples(*[st.sampled_from([0.0, 0.25, 1.0, 3.0])] * 3),
        radius=st.sampled_from([0.0, 0.05, 0.5, 2.0]), segments=st.sampled_from([2, 4, 8]))
@@ -502,6 +506,7 @@ def test_rounded_box_mesh_vertices_at_exact_distance(h, radius, segments):
     assert_closed_oriented_manifold(points, counts, indices)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("segments, tol", [(4, 0.03), (8, 0.008), (16, 0.002)])
 def test_rounded_box_mesh_volume_and_area_converge(segments, tol):
     """Outward-facing (positive volume) and close to the exact rounded box (Steiner formulas)."""
@@ -701,6 +706,7 @@ def variants():
     ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", FORMATS)
 @pytest.mark.parametrize("variant", variants(), ids=lambda v: v[0])
 def test_validators_clean_on_every_variant(tmp_path, fmt, variant):
@@ -709,6 +715,7 @@ def test_validators_clean_on_every_variant(tmp_path, fmt, variant):
     assert compliance_errors(out) == []
 
 
+@pytest.mark.slow
 def test_size_estimate_counts_obstacles_spin_and_velocities(tmp_path):
     """Within 15% of written files, for spinning and non-spinning spheres, with velocities,
     and with obstacles of shared and of distinct shapes."""

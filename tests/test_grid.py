@@ -7,7 +7,7 @@ lists every box whose reject bounds meet the cell grown by the margin.
 
 import numpy as np
 import pytest
-from conftest import shaped_half_extents
+from helpers import shaped_half_extents
 
 import warpsim as ws
 from warpsim import broad_phase as broad
@@ -42,21 +42,22 @@ def same(a, b, fields):
         assert np.array_equal(np.asarray(x).view(np.uint8), np.asarray(y).view(np.uint8)), f
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k", [1, 7, 60, 500, 10_000])
 @pytest.mark.parametrize("offset", [0.0, 1e4])
-def test_bounce_grid_is_bit_identical(k, offset, precision):
+def test_bounce_grid_is_bit_identical(device, k, offset, precision):
     rng = np.random.default_rng(k + int(offset))
     boxes, side = random_scene(k, rng, offset)
     pos, vel, rad = swarm_inputs(3000 if k < 10_000 else 400, side, rng, offset, boxes)
     brute = ws.bounce(pos, vel, rad, boxes, DT, precision=precision, broad_phase="brute",
-                      max_bounces=16)
+                      max_bounces=16, device=device)
     grid = ws.bounce(pos, vel, rad, boxes, DT, precision=precision, broad_phase="grid",
-                     max_bounces=16)
+                     max_bounces=16, device=device)
     same(brute, grid, FIELDS)
     assert brute.bounces.sum() > 0
 
 
-def test_spheres_on_cell_borders_and_resting():
+def test_spheres_on_cell_borders_and_resting(device):
     """Centres put exactly on cell borders (in the kernels' float32), and spheres resting on
     a floor and on box tops: the grid keeps every contact brute force finds."""
     floor = ws.RoundedBoxes(center=[[0, -0.5, 0], [1.0, 0.25, 0.3], [-1.2, 0.1, -0.7]],
@@ -77,7 +78,7 @@ def test_spheres_on_cell_borders_and_resting():
     vel[: n // 3] = 0.0
     keep = floor.signed_distance(pos).min(axis=1) >= r
     swarm = ws.Swarm(pos[keep], vel[keep], radius=r)
-    sims = {bp: ws.Simulator(scene, swarm, broad_phase=bp, device="cpu") for bp in
+    sims = {bp: ws.Simulator(scene, swarm, broad_phase=bp, device=device) for bp in
             ("brute", "grid")}
     assert sims["grid"].broad_phase == "grid"
     for sim in sims.values():
@@ -88,14 +89,15 @@ def test_spheres_on_cell_borders_and_resting():
     assert sims["brute"].stats.bounces == sims["grid"].stats.bounces > 0
 
 
-def test_simulator_grid_matches_brute_in_bundled_scenes(precision):
+@pytest.mark.slow
+def test_simulator_grid_matches_brute_in_bundled_scenes(device, precision):
     for name in ("room", "galton", "staircase", "pinball"):
         scene = ws.Scene.load(name)
         swarm = scene.spawn(n=400, seed=5)
         brute = ws.Simulator(scene, swarm, broad_phase="brute", precision=precision,
-                             device="cpu")
+                             device=device)
         grid = ws.Simulator(scene, swarm, broad_phase="grid", precision=precision,
-                            device="cpu")
+                            device=device)
         assert grid.broad_phase in ("grid", "grid-bvh")
         brute.step(60)
         grid.step(60)
@@ -103,6 +105,7 @@ def test_simulator_grid_matches_brute_in_bundled_scenes(precision):
         assert brute.stats.bounces == grid.stats.bounces
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k", [3, 40, 300])
 def test_cells_list_every_box_near_them(k):
     """The host invariant: cell c lists box b exactly when b's reject bounds meet c's domain
@@ -129,7 +132,7 @@ def test_cells_list_every_box_near_them(k):
     assert np.all(np.diff(grid.cell_boxes)[same_cell] > 0)
 
 
-def test_auto_picks_the_grid_for_the_standard_room():
+def test_auto_picks_the_grid_for_the_standard_room(device):
     scene = ws.Scene.load("room")
-    sim = ws.Simulator(scene, scene.spawn(n=100, seed=0), device="cpu")
+    sim = ws.Simulator(scene, scene.spawn(n=100, seed=0), device=device)
     assert sim.broad_phase == "grid"

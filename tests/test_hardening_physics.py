@@ -33,9 +33,10 @@ def plate_side(position, center, rotation, axis=0) -> np.ndarray:
 
 # -- 1. a point never crosses a plate ---------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("radius", [0.0, 1e-9, 1e-6])
 @pytest.mark.parametrize("offset", [0.0, 1e3])
-def test_points_never_cross_a_plate(precision, radius, offset):
+def test_points_never_cross_a_plate(device, precision, radius, offset):
     """Spheres of radius 0 (and tiny) aimed through the middle of a zero-thickness plate of any
     orientation, at 1 to 1e6 m/s, end every bounce on the side they started from."""
     rng = np.random.default_rng(11)
@@ -62,21 +63,23 @@ def test_points_never_cross_a_plate(precision, radius, offset):
                                 rotation=[rotations[i]])
         before = plate_side(starts[i], centers[i], rotations[i])
         out = ws.bounce([starts[i]], [velocities[i]], radius, boxes, 1 / 60, max_bounces=32,
-                        precision=precision)
+                        precision=precision, device=device)
         after = plate_side(out.position[0], centers[i], rotations[i])
         assert out.bounces[0] == 1, i  # one plate, convex: one contact, then it moves away
         assert np.sign(after) == np.sign(before), (i, before, after)
 
 
-def test_the_reported_case_stays_in_front():
+def test_the_reported_case_stays_in_front(device):
     plate = ws.RoundedBoxes(center=[[0, 0, 0]], half_extents=[[0, 1, 1]])
     for precision in ("float32", "float64"):
-        out = ws.bounce([[-1, 0, 0]], [[120, 0, 0]], 0.0, plate, 1 / 60, precision=precision)
+        out = ws.bounce([[-1, 0, 0]], [[120, 0, 0]], 0.0, plate, 1 / 60, precision=precision,
+                        device=device)
         assert out.bounces[0] == 1
         assert out.position[0, 0] == pytest.approx(-1.0, abs=1e-5)
         assert out.velocity[0, 0] == -120.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("radius", [0.0, 1e-9])
 @pytest.mark.parametrize("speed", [5.0, 1e3, 1e6])
 def test_closed_room_of_plates_holds_every_point(device, precision, radius, speed):
@@ -119,6 +122,7 @@ def test_thin_walls_with_points_keep_their_cells(device, precision):
 
 # -- 2. sideways speed on a flat frictionless floor --------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("correction", [True, False])
 @pytest.mark.parametrize("height,vx", [(0.5, 1.0), (0.01, 0.5)])
 def test_floor_keeps_horizontal_speed_and_bounce_height(device, precision, correction, height, vx):
@@ -188,6 +192,7 @@ def test_no_energy_gain_released_near_a_floor(device, precision, dt):
     assert (sim.state().position[:, 1] <= r + gaps + 9.81 * dt * dt).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", [1 / 60, 0.1, 1.0])
 def test_no_energy_gain_at_large_steps(device, precision, dt):
     """A ball dropped from 1 m never climbs above its energy height, at any step."""

@@ -27,6 +27,7 @@ def falling_sphere_file(tmp_path, n_frames=10, dt=0.02):
     return write_usd(tmp_path / "anim.usdc", warpsim.Scene(boxes, name="drop"), traj), traj
 
 
+@pytest.mark.slow
 def test_mp4_has_every_kth_frame_at_the_simulation_rate(tmp_path):
     pytest.importorskip("imageio_ffmpeg")
     from warpsim.export.movie import render_movie

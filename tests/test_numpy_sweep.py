@@ -146,6 +146,7 @@ def _decided(a, b, center, h, quat, rb, r, margin):
     return ok & (~ref.hit | steep | (ref.t == 0.0)), ref
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dtype", DTYPES, ids=["float64", "float32"])
 def test_random_segments_one_box(dtype):
     """20 random boxes (zero extents, sharp or rounded, any rotation) x 200 segments."""
@@ -170,6 +171,7 @@ def test_random_segments_one_box(dtype):
     assert checked > 0.9 * 20 * 200
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dtype", DTYPES, ids=["float64", "float32"])
 def test_random_groups_match_bounce_reference(dtype):
     """Groups of 12 boxes, 300 spheres each: nearest box, contact and reflected outputs."""

@@ -5,8 +5,11 @@ importable from ``warpsim`` itself."""
 import ast
 import importlib
 import pkgutil
+import re
 import tomllib
 from pathlib import Path
+
+import pytest
 
 import warpsim
 
@@ -101,11 +104,13 @@ def test_the_walk_sees_every_part_of_the_package():
     assert "warpsim.analysis.reference" in graph["warpsim.analysis.error_report"]
 
 
+@pytest.mark.slow
 def test_no_import_circle_in_the_package():
     cycle = find_cycle(import_graph())
     assert cycle is None, "import circle: " + " -> ".join(cycle)
 
 
+@pytest.mark.slow
 def test_nothing_imports_the_applications():
     graph = import_graph()
     for name, targets in graph.items():
@@ -119,3 +124,34 @@ def test_every_public_name_is_importable_from_warpsim():
     for name in warpsim.__all__:
         assert getattr(warpsim, name) is not None, name
     assert len(set(warpsim.__all__)) == len(warpsim.__all__)
+
+
+def test_every_name_the_readme_uses_is_public():
+    """``ws.X`` and ``warpsim.X`` in the README: a name of ``warpsim.__all__`` or one of the
+    package's modules (used as ``warpsim.module.name``), never a private path."""
+    readme = ROOT / "README.md"
+    if not readme.is_file():
+        pytest.skip("README.md not present (installed package)")
+    text = readme.read_text(encoding="utf-8")
+    modules = {name.split(".")[1] for name in package_modules() if name.count(".") >= 1}
+    used = set(re.findall(r"\b(?:ws|warpsim)\.([A-Za-z_]\w*)", text))
+    for name in used:
+        assert not name.startswith("_"), name
+        assert name in warpsim.__all__ or name in modules, f"warpsim.{name} is not public"
+    for name in ("PrecisionWarning", "ContactEvents", "ContactKind", "Motion", "BroadPhase"):
+        assert name in warpsim.__all__
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("module", ["warpsim", "warpsim.apps.cli", "warpsim.apps.bench",
+                                    "warpsim.analysis.accuracy"])
+def test_python_dash_m_entry_points(module):
+    """Each ``python -m`` entry point starts, without runpy's warning about a module its
+    package imported first."""
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-W", "error::RuntimeWarning", "-m", module, "--help"],
+                         capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("usage: warpsim")

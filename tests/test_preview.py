@@ -44,6 +44,7 @@ def floor_scene():
     return warpsim.Scene(boxes, name="floor")
 
 
+@pytest.mark.slow
 def test_default_size_picture_shows_obstacles_and_spheres(tmp_path):
     rng = np.random.default_rng(0)
     n = 12

@@ -8,6 +8,7 @@ import pytest
 README = Path(__file__).resolve().parents[1] / "README.md"
 
 
+@pytest.mark.slow
 def test_python_api_example_runs(tmp_path, monkeypatch):
     if not README.is_file():
         pytest.skip("README.md not present (installed package)")

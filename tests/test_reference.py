@@ -179,6 +179,7 @@ ROUNDING_DECIDED = {"tangent-face", "tangent-ball", "start-shell-along", "start-
                     "point-through"}
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None)
 @given(quat=st.tuples(*[st.floats(-1.0, 1.0)] * 4).filter(lambda q: np.linalg.norm(q) > 0.1),
        shift=st.tuples(*[st.floats(-50.0, 50.0)] * 3),
@@ -245,6 +246,7 @@ coord = st.floats(-3.0, 3.0)
 point = st.tuples(coord, coord, coord)
 
 
+@pytest.mark.slow
 @settings(max_examples=120, deadline=None)
 @given(h=st.tuples(half, half, half),
        quat=st.tuples(*[st.floats(-1.0, 1.0)] * 4).filter(lambda q: np.linalg.norm(q) > 0.1),
@@ -274,6 +276,7 @@ def test_feature_enumeration_agrees_with_distance_search(h, quat, center, rb, r,
     np.testing.assert_allclose(primary.normal[both], secondary.normal[both], atol=NORMAL_TOL)
 
 
+@pytest.mark.slow
 def test_methods_agree_on_random_batches():
     """Seeded batches: 40 random boxes (zero extents, sharp and rounded, any rotation), 1000
     segments each, a fifth of them starting near or inside the box."""
@@ -304,6 +307,7 @@ def test_methods_agree_on_random_batches():
     assert hits_total > 0.25 * 40 * 1000  # and the test is not about misses only
 
 
+@pytest.mark.slow
 def test_scalar_and_batch_forms_agree():
     rng = np.random.default_rng(7)
     for _ in range(10):

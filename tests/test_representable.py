@@ -53,6 +53,7 @@ def test_a_plain_run_passes_silently(precision):
         assert _run(precision) == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", [n for n, _ in ws.list_scenes()])
 def test_every_bundled_scene_passes_silently_in_both_precisions(name, precision):
     scene = ws.Scene.load(name)
@@ -140,6 +141,7 @@ def test_the_run_arguments_are_checked_too():
         _refused(message, **kwargs)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(precision=st.sampled_from(["float32", "float64"]),
        log_v=st.floats(-40.0, 40.0), log_dt=st.floats(-45.0, 35.0),
@@ -174,6 +176,7 @@ def test_what_is_accepted_stays_finite_in_the_precision(precision, log_v, log_dt
 # --- far from the origin ---------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(log_offset=st.floats(0.0, 12.0), precision=st.sampled_from(["float32", "float64"]),
        speed=st.sampled_from([0.0, 1.0, 30.0]))

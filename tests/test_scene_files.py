@@ -87,6 +87,7 @@ def test_bundled_scene_loads(name):
     assert scene.frames * scene.dt <= 10.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", BUNDLED)
 def test_bundled_scene_spawns_deterministically_and_clear_of_obstacles(name):
     scene = load_scene(name)
@@ -309,6 +310,7 @@ ERROR_CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("text, message", [c[1:] for c in ERROR_CASES],
                          ids=[c[0] for c in ERROR_CASES])
 def test_bad_file_error_names_file_table_key_and_index(tmp_path, text, message):
@@ -489,6 +491,7 @@ def test_emitter_hopeless_region_stops_early_and_says_how_many_draws():
                                       "clearance) in 200 draws each; ")
 
 
+@pytest.mark.slow
 def test_emitter_few_spheres_get_all_their_draws():
     # 90 % of the region is obstacle: one sphere fails 32 draws in 3.4 % of the seeds, but all
     # 200 only with probability 0.9**200 = 7e-10, so every one of these seeds places it.
@@ -519,6 +522,7 @@ def test_emitter_partly_crowded_region_counts_the_spheres_left(tmp_path):
     assert hopeless <= left <= hopeless + 3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("radius", ["1e30", "[0.01, 1.2]"])
 def test_emitter_radius_that_fits_nowhere_is_refused_first(tmp_path, radius):
     scene = load_scene(write(tmp_path, _plate_scene(radius)))
@@ -618,7 +622,8 @@ def test_documented_example_loads_and_spawns(tmp_path):
     doc = Path(__file__).resolve().parents[1] / "README.md"
     if not doc.is_file():
         pytest.skip("README.md not present (installed package)")
-    blocks = re.findall(r"```toml\n(.*?)```", doc.read_text(encoding="utf-8"), flags=re.S)
+    section = doc.read_text(encoding="utf-8").split("## Scene files (TOML)", 1)[1]
+    blocks = re.findall(r"```toml\n(.*?)```", section.split("\n## ", 1)[0], flags=re.S)
     assert len(blocks) == 1
     scene = load_scene(write(tmp_path, blocks[0], "example.toml"))
     assert scene.name == "example" and len(scene.boxes) == 8 + 12

@@ -8,14 +8,15 @@ import warpsim as ws
 SCENES = [name for name, _ in ws.list_scenes()]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SCENES)
-def test_bundled_scene_runs(name):
+def test_bundled_scene_runs(device, name):
     """A few frames with each scene's own settings (its kernel variant): finite, nobody inside
     an obstacle beyond float32 rounding of the scene's coordinates, energy not gained."""
     scene = ws.Scene.load(name)
     n = min(scene.emitter.count, 64)
     swarm = scene.spawn(n=n, seed=1)
-    sim = ws.Simulator(scene, swarm)
+    sim = ws.Simulator(scene, swarm, device=device)
     traj = sim.run(5)
     assert traj.position.shape == (6, n, 3)
     assert np.isfinite(traj.position).all() and np.isfinite(traj.orientation).all()

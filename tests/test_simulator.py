@@ -1,6 +1,6 @@
 """Whole frames (``ws.Simulator``): physics laws, with tolerances from the integrator's error.
 
-One frame (SPEC "Dynamics of one frame"): ``v += g dt`` (semi-implicit Euler), the multi-bounce
+One frame (README "What it models"): ``v += g dt`` (semi-implicit Euler), the multi-bounce
 move of ``v dt``, the speed reset from the per-sphere energy ``E`` and the orientation step. The
 energy is that of the velocity at the frame's end, ``u = v + g dt / 2`` (``v`` is semi-implicit
 Euler's step velocity), which semi-implicit Euler keeps exactly in free flight. Expected
@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import closed_room
+from helpers import DEVICES, closed_room
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -201,25 +201,26 @@ def test_dropped_ball_with_losses_comes_to_rest_on_the_floor():
     np.testing.assert_array_equal(state.velocity, 0.0)
 
 
-def test_free_fall_follows_the_parabola():
+def test_free_fall_follows_the_parabola(device):
     """Dropped from rest far above anything: y(t) = h0 - g t^2 / 2 within the semi-implicit
     Euler offset g dt t / 2 (y_k = h0 - g t_k^2 / 2 - g dt t_k / 2 exactly), for 2 s."""
     frames = 120
     sim = ws.Simulator(ws.Scene(floor((0.0, -100.0, 0.0))),
-                       ws.Swarm([(0.0, 10.0, 0.0)], [(0.0, 0.0, 0.0)], radius=DROP_R))
+                       ws.Swarm([(0.0, 10.0, 0.0)], [(0.0, 0.0, 0.0)], radius=DROP_R),
+                       device=device)
     y = sim.run(frames).position[:, 0, 1].astype(np.float64)
     t = np.arange(frames + 1) * DT
     tol = ROUND_ULPS * EPS["float32"] * 110.0  # heights are O(100 m) from the energy origin
     np.testing.assert_array_less(np.abs(y - (10.0 - 0.5 * G * t * t)), 0.5 * G * DT * t + tol)
 
 
-def test_free_flight_keeps_horizontal_velocity():
+def test_free_flight_keeps_horizontal_velocity(device):
     """Gravity is vertical: in free flight the horizontal velocity is constant and
     x(t) = x0 + vx t (to rounding); y(t) follows the parabola within the semi-implicit Euler
     offset, |y - (y0 + vy t - g t^2 / 2)| <= g dt t / 2."""
     frames = 60
     sim = ws.Simulator(ws.Scene(floor((0.0, -10.0, 0.0))),
-                       ws.Swarm([(0.0, 1.0, 0.0)], [(2.0, 5.0, 0.0)], radius=DROP_R))
+                       ws.Swarm([(0.0, 1.0, 0.0)], [(2.0, 5.0, 0.0)], radius=DROP_R), device=device)
     trajectory = sim.run(frames)
     t = np.arange(frames + 1) * DT
     x, y = trajectory.position[:, 0, 0], trajectory.position[:, 0, 1]
@@ -268,9 +269,10 @@ def test_ball_thrown_at_a_wall_mirrors(precision, device):
 # -- friction spin -----------------------------------------------------------------------------
 
 
-def test_sliding_on_a_floor_spins_up_about_n_cross_v():
+@pytest.mark.slow
+def test_sliding_on_a_floor_spins_up_about_n_cross_v(device):
     """Spheres (r = 0.1, m = 1) sliding along +x on a floor (n = +y), k_f = 2 kg/s, clamp
-    5 rad/s. Each frame's support contact applies the SPEC torque: with Rot = (0, 0, w) and
+    5 rad/s. Each frame's support contact applies the friction torque: with Rot = (0, 0, w) and
     OC = -r n = (0, -r, 0), Rot x OC = (w r, 0, 0), so v_t,rel = (vx + w r, 0, 0) and
     dL = dt OC x (-k_f v_t,rel) = (0, 0, -dt r k_f (vx + w r)). From L = 0 the spin grows
     along -z = n x v / |v| (towards rolling), w -> -vx / r geometrically (ratio
@@ -281,9 +283,9 @@ def test_sliding_on_a_floor_spins_up_about_n_cross_v():
     scene = ws.Scene(floor(), friction=k_f, max_angular_speed=clamp)
     swarm = ws.Swarm([(0.0, r, 0.0), (0.0, r, 1.0)], [(0.2, 0.0, 0.0), (2.0, 0.0, 0.0)],
                      radius=r, mass=m)
-    sim = ws.Simulator(scene, swarm)
+    sim = ws.Simulator(scene, swarm, device=device)
     assert sim.spin
-    w_ref = np.zeros(2)  # float64 iteration of the SPEC recursion, with the simulated vx
+    w_ref = np.zeros(2)  # float64 iteration of the spin recursion, with the simulated vx
     eps = EPS["float32"]
     orientations = []
     for frame in range(600):
@@ -329,14 +331,14 @@ def closed_room_swarm(n, seed, half=1.0, r=0.05):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("precision,frames", [("float32", 10_000), ("float64", 2_000)])
-def test_energy_kept_in_a_closed_room(precision, frames):
+def test_energy_kept_in_a_closed_room(device, precision, frames):
     """Closed room, k = 1, correction on: the per-sphere energy is a constant of the motion
-    (SPEC), and the mechanical energy 1/2 m |v|^2 - m g . (p - origin) of the state equals it
-    to rounding at every checkpoint: within ROUND_ULPS ulps of the energy scale
+    (README "What it models"), and the mechanical energy 1/2 m |v|^2 - m g . (p - origin) of
+    the state equals it to rounding at every checkpoint: within ROUND_ULPS ulps of the energy scale
     1/2 m v_max^2 + m g (room height), never more (no gain), whatever the number of frames."""
     half = 1.0
     swarm, mass = closed_room_swarm(64, seed=3, half=half)
-    sim = ws.Simulator(ws.Scene(closed_room(half)), swarm, precision=precision)
+    sim = ws.Simulator(ws.Scene(closed_room(half)), swarm, precision=precision, device=device)
     e0 = sim.initial_energy.astype(np.float64)
     tol = ROUND_ULPS * EPS[precision] * (0.5 * mass * 5.0**2 + mass * G * 2.0 * half)
     p_tol = PIECE_ULPS * EPS[precision] * (2.0 * half + 5.0 * DT) * (MAX_BOUNCES + 1)
@@ -355,7 +357,7 @@ def test_energy_kept_in_a_closed_room(precision, frames):
 @pytest.mark.slow
 @pytest.mark.parametrize("precision", ["float32", "float64"])
 @pytest.mark.parametrize("offset", [0.0, 1.0e3])
-def test_spheres_at_rest_on_a_floor_stay_put(offset, precision):
+def test_spheres_at_rest_on_a_floor_stay_put(device, offset, precision):
     """Spheres of radius 0.01 to 1 m resting on a floor (centre at y = r), at the origin and
     1 km away: at every one of 10 000 frames none has moved (< 1e-6 m, no jitter), none sank
     (distance to the floor >= r - one ulp of the coordinates, the rounding of the input
@@ -368,7 +370,7 @@ def test_spheres_at_rest_on_a_floor_stay_put(offset, precision):
     position = center + np.column_stack([xz[:, 0], r, xz[:, 1]])
     boxes = floor(center, half=20.0)
     sim = ws.Simulator(ws.Scene(boxes), ws.Swarm(position, np.zeros((n, 3)), radius=r),
-                       precision=precision)
+                       precision=precision, device=device)
     positions = sim.run(10_000).position.astype(np.float64)  # every frame
     assert np.abs(positions - positions[0]).max() < 1e-6
     ulp = EPS[precision] * (np.abs(center).max() + 20.0)
@@ -386,14 +388,15 @@ WALL_CONTACT_CASES = [
 
 
 @pytest.mark.parametrize("case", WALL_CONTACT_CASES, ids=[c[0] for c in WALL_CONTACT_CASES])
-def test_sphere_starting_in_contact_with_a_wall(case):
+def test_sphere_starting_in_contact_with_a_wall(device, case):
     """A sphere (r = 1/4) touching the wall x = 0 (normal +x), gravity along the wall: moving
     away or along it is no contact (straight move of v dt, gravity included in the same frame);
     moving into it is a contact at t = 0 and the whole path is reflected. After 60 frames it is
     still outside the wall."""
     name, velocity, expected, contacts = case
     boxes = ws.RoundedBoxes(center=[(-0.5, 0.0, 0.0)], half_extents=[(0.5, 10.0, 10.0)])
-    sim = ws.Simulator(ws.Scene(boxes), ws.Swarm([(0.25, 1.0, 0.0)], [velocity], radius=0.25))
+    sim = ws.Simulator(ws.Scene(boxes), ws.Swarm([(0.25, 1.0, 0.0)], [velocity], radius=0.25),
+                       device=device)
     sim.step()
     state = sim.state()
     tol = PIECE_ULPS * EPS["float32"] * 2.0 * 2
@@ -414,9 +417,10 @@ def plates_in_a_room(rng, half, half_thickness, count=6):
     return ws.RoundedBoxes.concatenate([closed_room(half), plates])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("half_thickness", [0.0, 1e-3])
 @pytest.mark.parametrize("speed", [60.0, 600.0])
-def test_fast_spheres_among_thin_rotated_plates(speed, half_thickness):
+def test_fast_spheres_among_thin_rotated_plates(device, speed, half_thickness):
     """256 spheres at 60 m/s (1 m per frame) or 600 m/s (10 m per frame, several times the room)
     among six rotated plates in a closed 4 m room, 300 frames: no NaN, nobody escapes, nobody
     inside a box. Tolerance: PIECE_ULPS ulps of (room + path per frame) per piece, for the
@@ -427,7 +431,7 @@ def test_fast_spheres_among_thin_rotated_plates(speed, half_thickness):
     position = spawn_outside(rng, boxes, half, r, n)
     velocity = rng.normal(size=(n, 3))
     velocity *= speed / np.linalg.norm(velocity, axis=1)[:, None]
-    sim = ws.Simulator(ws.Scene(boxes), ws.Swarm(position, velocity, radius=r))
+    sim = ws.Simulator(ws.Scene(boxes), ws.Swarm(position, velocity, radius=r), device=device)
     trajectory = sim.run(300)
     p = trajectory.position.reshape(-1, 3)
     tol = PIECE_ULPS * EPS["float32"] * (2.0 * half + speed * DT) * (MAX_BOUNCES + 1)
@@ -437,7 +441,8 @@ def test_fast_spheres_among_thin_rotated_plates(speed, half_thickness):
     assert np.isfinite(sim.state().velocity).all()
 
 
-def test_narrow_wedge_caps_and_never_lets_a_sphere_in():
+@pytest.mark.slow
+def test_narrow_wedge_caps_and_never_lets_a_sphere_in(device):
     """Two zero-thickness plates 2 m long meeting at the origin, each 5 degrees from the
     vertical (a V); spheres (r = 5 cm) dropped in from 1.5 m. Deep in the V the gap between the
     plates closes to the sphere's diameter: contacts alternate faster and faster and the cap
@@ -458,7 +463,8 @@ def test_narrow_wedge_caps_and_never_lets_a_sphere_in():
     x = rng.uniform(-0.05, 0.05, n)
     x[0] = 0.0
     position = np.column_stack([x, np.full(n, 1.5), rng.uniform(-0.3, 0.3, n)])
-    sim = ws.Simulator(ws.Scene(boxes), ws.Swarm(position, np.zeros((n, 3)), radius=r))
+    sim = ws.Simulator(ws.Scene(boxes), ws.Swarm(position, np.zeros((n, 3)), radius=r),
+                       device=device)
     trajectory = sim.run(600)
     tol = PIECE_ULPS * EPS["float32"] * (3.0 + 10.0 * DT) * (MAX_BOUNCES + 1)
     assert np.isfinite(trajectory.position).all()
@@ -470,7 +476,8 @@ def test_narrow_wedge_caps_and_never_lets_a_sphere_in():
         1.0, 0.0, 3.0, "float32"))
 
 
-def test_random_scenes_with_losses_settle_without_entering_boxes():
+@pytest.mark.slow
+def test_random_scenes_with_losses_settle_without_entering_boxes(device):
     """Random rounded boxes in a room, k = 1/2, 1200 frames: spheres come to rest on faces,
     edges and in creases. At every checkpoint: no NaN, nobody inside, and the per-sphere
     energy never grows (contacts only remove energy)."""
@@ -481,7 +488,7 @@ def test_random_scenes_with_losses_settle_without_entering_boxes():
     position = spawn_outside(rng, boxes, half, r, n)
     velocity = rng.normal(size=(n, 3)) * 3.0
     sim = ws.Simulator(ws.Scene(boxes, energy_retention=0.5),
-                       ws.Swarm(position, velocity, radius=r))
+                       ws.Swarm(position, velocity, radius=r), device=device)
     energy = sim.initial_energy.astype(np.float64)
     tol = PIECE_ULPS * EPS["float32"] * (2.0 * half + 1.0) * (MAX_BOUNCES + 1)
     e_tol = ROUND_ULPS * EPS["float32"] * (0.5 * 10.0**2 + G * 2.0 * half)
@@ -511,10 +518,12 @@ def energy_gain_tolerance(mass, speed, height, precision):
     return rounding + 1.5 * mass * G * G_DT2
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("device", DEVICES)
 @settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), count=st.integers(1, 5),
        speed=st.floats(0.0, 20.0), radius=st.floats(0.005, 0.15))
-def test_invariants_over_random_scenes(seed, count, speed, radius):
+def test_invariants_over_random_scenes(device, seed, count, speed, radius):
     """No NaN, nobody inside a box (or out of the room), no energy gain: the per-sphere energy
     is constant (k = 1) and the state's mechanical energy never exceeds it by more than
     :func:`energy_gain_tolerance`."""
@@ -525,7 +534,8 @@ def test_invariants_over_random_scenes(seed, count, speed, radius):
     velocity = rng.normal(size=(n, 3))
     velocity *= speed * rng.random((n, 1)) / np.linalg.norm(velocity, axis=1)[:, None]
     mass = rng.uniform(0.5, 2.0, n)
-    sim = ws.Simulator(ws.Scene(boxes), ws.Swarm(position, velocity, radius=radius, mass=mass))
+    sim = ws.Simulator(ws.Scene(boxes), ws.Swarm(position, velocity, radius=radius, mass=mass),
+                       device=device)
     e0 = sim.initial_energy.astype(np.float64)
     tol = PIECE_ULPS * EPS["float32"] * (2.0 * half + speed * DT) * (MAX_BOUNCES + 1)
     e_tol = energy_gain_tolerance(mass, speed, 2.0 * half, "float32")
@@ -551,6 +561,7 @@ def state_digest(state) -> str:
     return h.hexdigest()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("friction", [0.0, 0.5], ids=["no-spin", "spin"])
 def test_same_inputs_give_bit_identical_states(friction, device):
     """Two simulators built from the same inputs: bit-identical states after 200 frames of a
@@ -621,9 +632,9 @@ def test_bad_swarm_refused_naming_the_field(kwargs, message):
     (dict(precision="float16"), r"precision must be one of"),
     (dict(precision="double"), r"precision must be one of"),
 ])
-def test_bad_simulator_arguments_refused(kwargs, message):
+def test_bad_simulator_arguments_refused(device, kwargs, message):
     with pytest.raises(ValueError, match=message):
-        ws.Simulator(ws.Scene(floor()), ws.Swarm(**GOOD_SWARM), **kwargs)
+        ws.Simulator(ws.Scene(floor()), ws.Swarm(**GOOD_SWARM), **kwargs, device=device)
 
 
 @pytest.mark.parametrize("kwargs,message", [
@@ -638,15 +649,15 @@ def test_bad_scene_refused(kwargs, message):
         ws.Scene(floor(), **kwargs)
 
 
-def test_bad_frames_refused():
-    sim = ws.Simulator(ws.Scene(floor()), ws.Swarm(**GOOD_SWARM))
+def test_bad_frames_refused(device):
+    sim = ws.Simulator(ws.Scene(floor()), ws.Swarm(**GOOD_SWARM), device=device)
     for call in (lambda: sim.step(0), lambda: sim.run(0), lambda: sim.run(5, every=0)):
         with pytest.raises(ValueError, match=r"(frames|every) must be >= 1"):
             call()
     assert sim.frame == 0
 
 
-def test_inputs_never_mutated_and_swarm_holds_copies():
+def test_inputs_never_mutated_and_swarm_holds_copies(device):
     rng = np.random.default_rng(4)
     n = 8
     arrays = dict(position=rng.uniform(0.2, 1.0, (n, 3)), velocity=rng.normal(size=(n, 3)),
@@ -661,7 +672,7 @@ def test_inputs_never_mutated_and_swarm_holds_copies():
     snapshot = {k: getattr(swarm, k).copy() for k in arrays}
     arrays["position"][0] = 99.0  # the caller's arrays are theirs to change
     np.testing.assert_array_equal(swarm.position, snapshot["position"])
-    sim = ws.Simulator(ws.Scene(floor(), friction=0.5), swarm)
+    sim = ws.Simulator(ws.Scene(floor(), friction=0.5), swarm, device=device)
     sim.step(30)
     state = sim.state()
     for name in snapshot:
@@ -673,7 +684,7 @@ def test_inputs_never_mutated_and_swarm_holds_copies():
 # -- kernel variants -----------------------------------------------------------------------------
 
 
-def test_no_spin_variant_leaves_orientation_and_angular_momentum_as_given():
+def test_no_spin_variant_leaves_orientation_and_angular_momentum_as_given(device):
     """Friction 0 and no initial spin: the kernel without spin code is used and the orientation
     stays exactly the given (normalised) quaternion, the angular momentum exactly zero, while
     the spheres bounce around a room."""
@@ -682,7 +693,7 @@ def test_no_spin_variant_leaves_orientation_and_angular_momentum_as_given():
     swarm, _ = closed_room_swarm(n, seed=8)
     orientation = random_unit_quaternions(rng, n)
     swarm = ws.Swarm(swarm.position, swarm.velocity, radius=0.05, orientation=orientation)
-    sim = ws.Simulator(ws.Scene(closed_room(1.0)), swarm)
+    sim = ws.Simulator(ws.Scene(closed_room(1.0)), swarm, device=device)
     assert sim.spin is False
     sim.step(300)
     state = sim.state()
@@ -691,7 +702,7 @@ def test_no_spin_variant_leaves_orientation_and_angular_momentum_as_given():
     np.testing.assert_array_equal(state.angular_momentum, 0.0)
 
 
-def test_initial_spin_without_friction_turns_at_constant_rate():
+def test_initial_spin_without_friction_turns_at_constant_rate(device):
     """Friction 0 but a sphere spinning from the start: the spin variant runs, L stays as given
     (no friction torque) and the orientation turns by |Rot| dt per frame about Rot = L / I:
     after k frames o = exp(1/2 Rot k dt) o0 (constant Rot, so the frame steps compose)."""
@@ -702,7 +713,8 @@ def test_initial_spin_without_friction_turns_at_constant_rate():
     q0 = np.array([0.0, 0.0, math.sin(0.3), math.cos(0.3)])
     swarm = ws.Swarm([(0.0, 2.0, 0.0)], [(0.0, 0.0, 0.0)], radius=r, mass=m,
                      angular_momentum=[L], orientation=[q0])
-    sim = ws.Simulator(ws.Scene(floor((0.0, -100.0, 0.0)), gravity=(0.0, 0.0, 0.0)), swarm)
+    sim = ws.Simulator(ws.Scene(floor((0.0, -100.0, 0.0)), gravity=(0.0, 0.0, 0.0)), swarm,
+                       device=device)
     assert sim.spin is True
     frames = 120
     sim.step(frames)

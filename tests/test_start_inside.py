@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import shaped_half_extents
+from helpers import shaped_half_extents
 
 import warpsim as ws
 from warpsim import feasibility, obstacles
@@ -69,6 +69,7 @@ def _scene(rng, kind, feature, n, depth, offset=0.0):
     return boxes, position, radius, depth
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("feature", FEATURES)
 @pytest.mark.parametrize("kind", KINDS)
 @pytest.mark.parametrize("offset", [0.0, 1e4])
@@ -86,6 +87,7 @@ def test_touching_or_a_few_ulps_in_is_legal(precision, kind, feature, offset):
     feasibility.check_outside(boxes, position, radius * 0.5, precision)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("feature", FEATURES)
 @pytest.mark.parametrize("kind", KINDS)
 def test_inside_is_refused_naming_sphere_box_and_depth(precision, kind, feature):
@@ -174,6 +176,7 @@ def _brute_nearest(boxes, points, within):
     return np.where(near, best, np.inf), np.where(near, index, -1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(6))
 def test_nearest_is_the_brute_force_minimum_bit_for_bit(seed, monkeypatch):
     rng = np.random.default_rng(seed)
@@ -199,6 +202,7 @@ def test_nearest_ties_take_the_lowest_index_and_copies_are_found():
     assert index.tolist() == [0, 3, -1]
 
 
+@pytest.mark.slow
 def test_a_million_spheres_among_ten_thousand_boxes_in_bounded_memory():
     rng = np.random.default_rng(11)
     k, n = 10_000, 1_000_000

@@ -1,4 +1,4 @@
-"""Named cases for the single-box sweep (sheet method 1), each with an analytic answer.
+"""Named cases for the single-box sweep, each with an analytic answer.
 
 Most cases are built backwards (Jolt's habit): pick the contact centre ``P`` on the Minkowski
 surface with its outward normal ``n``, a direction ``d`` with ``d . n < 0`` and a fraction ``t``,
@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import TOLERANCES
+from helpers import TOLERANCES
 
 import warpsim as ws
 
@@ -93,6 +93,7 @@ HIT_CASES += [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", HIT_CASES, ids=[c[0] for c in HIT_CASES])
 def test_hit_built_backwards(case, precision, device):
     name, box, r, lp, ln, d, t = case
@@ -153,14 +154,14 @@ def test_start_in_contact_moving_in_is_hit_at_zero(start, velocity, normal, prec
 
 def test_sharp_box_edge_sliding_path_is_a_face_hit():
     """A path on the top plane of a sharp box crosses the -x face plane at its top edge: the
-    closed box is touched there, the motion goes into that face, so it is a hit (the sheet's
+    closed box is touched there, the motion goes into that face, so it is a hit (the
     OBB entry) with the face normal."""
     c = _one([-4.0, 0.5, 0.0], [4.0, 0.0, 0.0], 0.0, SHARP)
     assert c.hit[0] and c.t[0] == pytest.approx(0.75)
     np.testing.assert_array_equal(c.normal[0], [-1.0, 0.0, 0.0])
 
 
-def test_reflected_velocity_never_points_in_near_grazing():
+def test_reflected_velocity_never_points_in_near_grazing(device):
     """Paths that pass an edge at distance R (1 +- 1e-k): consistent hit or miss, finite, the
     reflected velocity leaves the surface and hits stay on the near side."""
     rng = np.random.default_rng(7)
@@ -171,7 +172,7 @@ def test_reflected_velocity_never_points_in_near_grazing():
     a[:, :2] += rng.normal(0.0, 1e-3, (n, 2)) * (offsets < R)[:, None]
     v = np.stack([-rng.uniform(0, 1e-2, n), -rng.uniform(0, 1e-2, n), np.full(n, 6.0)], axis=1)
     for precision in ("float32", "float64"):
-        c = ws.collide_box(a, v, 0.25, BOX, 1.0, precision=precision)
+        c = ws.collide_box(a, v, 0.25, BOX, 1.0, precision=precision, device=device)
         for f in ("t", "position", "normal", "new_position", "new_velocity"):
             assert np.isfinite(getattr(c, f)).all(), f
         hit = c.hit
@@ -179,7 +180,7 @@ def test_reflected_velocity_never_points_in_near_grazing():
         assert np.all(np.einsum("ij,ij->i", v[hit], c.normal[hit]) < 0.0)
 
 
-def test_far_from_origin_gives_same_answer():
+def test_far_from_origin_gives_same_answer(device):
     """The same scene translated by 1e4 m (exact in float32) gives the same t and normal."""
     rng = np.random.default_rng(3)
     n = 500
@@ -189,8 +190,8 @@ def test_far_from_origin_gives_same_answer():
     shift = np.array([1.0e4, -1.0e4, 1.0e4])
     box_far = ws.RoundedBox(center=ROT_BOX.center + shift, half_extents=ROT_BOX.half_extents,
                             rotation=ROT_BOX.rotation, radius=ROT_BOX.radius)
-    near = ws.collide_box(a, v, 0.25, ROT_BOX, 1.0)
-    far = ws.collide_box(a + shift, v, 0.25, box_far, 1.0)
+    near = ws.collide_box(a, v, 0.25, ROT_BOX, 1.0, device=device)
+    far = ws.collide_box(a + shift, v, 0.25, box_far, 1.0, device=device)
     np.testing.assert_array_equal(near.hit, far.hit)
     assert near.hit.sum() > 50
     np.testing.assert_array_equal(near.t, far.t)
@@ -200,7 +201,7 @@ def test_far_from_origin_gives_same_answer():
 
 
 @pytest.mark.parametrize("speed", [600.0, 5000.0])
-def test_thin_plate_at_high_speed_never_tunnels(speed, precision):
+def test_thin_plate_at_high_speed_never_tunnels(device, speed, precision):
     """A plate of zero thickness stops every sphere aimed at it, whatever the speed."""
     n = 256
     rng = np.random.default_rng(11)
@@ -208,7 +209,7 @@ def test_thin_plate_at_high_speed_never_tunnels(speed, precision):
     a = np.column_stack([rng.uniform(-0.9, 0.9, n), np.full(n, 10.0), rng.uniform(-0.9, 0.9, n)])
     v = np.column_stack([rng.uniform(-1, 1, n), np.full(n, -speed), rng.uniform(-1, 1, n)])
     dt = 1.0 / 60.0
-    c = ws.collide_box(a, v, r, PLATE, dt, precision=precision)
+    c = ws.collide_box(a, v, r, PLATE, dt, precision=precision, device=device)
     assert c.hit.all()
     t_exact = (10.0 - r) / (speed * dt)
     np.testing.assert_allclose(c.t, t_exact, rtol=TOLERANCES[precision]["rel"] * 10)
@@ -216,12 +217,12 @@ def test_thin_plate_at_high_speed_never_tunnels(speed, precision):
     np.testing.assert_allclose(c.normal, np.tile([0.0, 1.0, 0.0], (n, 1)), atol=1e-6)
 
 
-def test_inputs_not_modified_and_results_are_copies():
+def test_inputs_not_modified_and_results_are_copies(device):
     a = np.array([[-4.0, 0.0, 0.0]])
     v = np.array([[4.0, 0.0, 0.0]])
     r = np.array([0.25])
     before = (a.copy(), v.copy(), r.copy())
-    ws.collide_box(a, v, r, BOX, 1.0)
+    ws.collide_box(a, v, r, BOX, 1.0, device=device)
     for x, y in zip((a, v, r), before, strict=True):
         np.testing.assert_array_equal(x, y)
 
@@ -236,14 +237,14 @@ def test_inputs_not_modified_and_results_are_copies():
     (dict(velocity=[[0, 0, 0]]), r"velocity must have shape \(2, 3\)"),
     (dict(precision="float16"), r"precision must be one of"),
 ])
-def test_bad_input_names_field_and_index(kwargs, message):
+def test_bad_input_names_field_and_index(device, kwargs, message):
     args = dict(position=[[0, 0, 0], [1, 1, 1]], velocity=[[1, 0, 0], [1, 0, 0]], radius=0.1,
                 dt=0.1)
     args.update(kwargs)
     precision = args.pop("precision", "float32")
     with pytest.raises(ValueError, match=message):
         ws.collide_box(args["position"], args["velocity"], args["radius"], BOX, args["dt"],
-                       precision=precision)
+                       precision=precision, device=device)
 
 
 @pytest.mark.parametrize("kwargs,message", [

@@ -1,12 +1,13 @@
 """Properties of the sweep over random rounded boxes and segments (hypothesis).
 
 Each example draws one box and a batch of segments aimed around it, runs the kernels once, and
-checks the SPEC's invariants with the float64 signed distance of ``RoundedBoxes``, which is an
+checks the sweep's invariants with the float64 signed distance of ``RoundedBoxes``, which is an
 independent formula (distance to the core box minus the radius), not the kernels' method.
 """
 
 import numpy as np
-from conftest import TOLERANCES, shaped_half_extents
+import pytest
+from helpers import DEVICES, TOLERANCES, shaped_half_extents
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -41,12 +42,14 @@ def _sd(box, pts):
     return box.as_boxes().signed_distance(pts)[:, 0]
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("device", DEVICES)
 @settings(max_examples=80, deadline=None)
 @given(case=boxes_and_segments(), precision=st.sampled_from(["float32", "float64"]))
-def test_sweep_invariants(case, precision):
+def test_sweep_invariants(device, case, precision):
     box, r, a, d = case
     R = box.radius + r
-    c = ws.collide_box(a, d, r, box, 1.0, precision=precision)
+    c = ws.collide_box(a, d, r, box, 1.0, precision=precision, device=device)
     tol = TOLERANCES[precision]
     scale = max(1.0, float(np.abs(a).max()), float(np.abs(a + d).max()))
     surface_tol = 50 * tol["rel"] * scale  # distance error of a computed contact [m]
@@ -113,13 +116,15 @@ def group_scenes(draw):
     return boxes, a, d
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("device", DEVICES)
 @settings(max_examples=40, deadline=None)
 @given(scene=group_scenes(), precision=st.sampled_from(["float32", "float64"]))
-def test_nearest_of_group_is_min_over_single_boxes(scene, precision):
+def test_nearest_of_group_is_min_over_single_boxes(device, scene, precision):
     boxes, a, d = scene
     r = 0.1
-    group = ws.collide_boxes(a, d, r, boxes, 1.0, precision=precision)
-    singles = [ws.collide_box(a, d, r, boxes[k], 1.0, precision=precision)
+    group = ws.collide_boxes(a, d, r, boxes, 1.0, precision=precision, device=device)
+    singles = [ws.collide_box(a, d, r, boxes[k], 1.0, precision=precision, device=device)
                for k in range(len(boxes))]
     t_all = np.stack([np.where(s.hit, s.t, np.inf) for s in singles], axis=1)
     any_hit = np.isfinite(t_all).any(axis=1)

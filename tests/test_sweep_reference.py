@@ -11,7 +11,7 @@ same ``t``), so they are compared only where the reference is a face-interior hi
 
 import numpy as np
 import pytest
-from conftest import shaped_half_extents
+from helpers import shaped_half_extents
 from reference import rounded_box_sdf, sweep_reference_batch
 
 import warpsim as ws
@@ -55,8 +55,9 @@ def _decided(box, r, a, d, ref, band):
     return ok
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["box", "plate", "stick", "point"])
-def test_kernels_match_reference(kind, precision):
+def test_kernels_match_reference(device, kind, precision):
     band = BANDS[precision]
     rng = np.random.default_rng({"box": 1, "plate": 2, "stick": 3, "point": 4}[kind])
     decided_hits = decided_total = 0
@@ -66,7 +67,7 @@ def test_kernels_match_reference(kind, precision):
         a, d = _segments(rng, box, r, 400)
         ref = sweep_reference_batch(a, a + d, box.center, box.half_extents, box.rotation,
                                     box.radius, r)
-        got = ws.collide_box(a, d, r, box, 1.0, precision=precision)
+        got = ws.collide_box(a, d, r, box, 1.0, precision=precision, device=device)
         ok = _decided(box, r, a, d, ref, band)
         decided_total += ok.sum()
         np.testing.assert_array_equal(got.hit[ok], ref.hit[ok])
@@ -84,7 +85,8 @@ def test_kernels_match_reference(kind, precision):
     assert decided_hits > 0.2 * 12 * 400
 
 
-def test_nearest_of_group_matches_reference():
+@pytest.mark.slow
+def test_nearest_of_group_matches_reference(device):
     """collide_boxes over overlapping rotated boxes against the float64 reference's minimum."""
     from reference import nearest_reference_batch
 
@@ -97,7 +99,7 @@ def test_nearest_of_group_matches_reference():
     d = -a * rng.uniform(0.2, 1.5, (3000, 1)) + rng.normal(0, 0.5, (3000, 3))
     r = 0.05
     ref = nearest_reference_batch(a, a + d, boxes, r)
-    got = ws.collide_boxes(a, d, r, boxes, 1.0, precision="float64")
+    got = ws.collide_boxes(a, d, r, boxes, 1.0, precision="float64", device=device)
     # rows decided: the two nearest candidate boxes are apart by more than rounding
     agree = got.hit == ref["hit"]
     assert agree.mean() > 0.999

@@ -45,6 +45,7 @@ __all__ = [
     "Swarm",
     "Trajectory",
     "list_scenes",
+    "obstacles_from_usd",
 ]
 
 __version__ = "0.1.0"
@@ -55,6 +56,10 @@ def __getattr__(name):
         import importlib
 
         return importlib.import_module(".export", __name__)
+    if name == "obstacles_from_usd":  # lazy: reading a stage needs pxr
+        from .export.stage_in import obstacles_from_usd
+
+        return obstacles_from_usd
     if name in ("analysis", "distributed"):  # lazy: the reference, the studies, Dask
         import importlib
 

@@ -1,4 +1,5 @@
-"""Batched single-frame sphere sweeps (sheet methods 1, 2 and 3): numpy in, numpy out."""
+"""Batched single-frame sphere sweeps, numpy in, numpy out: against one rounded box, against a
+group of boxes (the first contact), and several bounces in one frame."""
 
 from __future__ import annotations
 
@@ -52,7 +53,7 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
                   motion: str = "linear", gravity=None) -> Contacts:
     """First contact of each moving sphere with a group of static rounded boxes.
 
-    With ``motion="linear"`` every sphere moves in a straight line for ``dt`` (the sheet's
+    With ``motion="linear"`` every sphere moves in a straight line for ``dt`` (the
     segment ``A -> A + v dt``); with ``motion="ballistic"`` it follows the exact parabola
     ``A + v s + 1/2 g s^2``, ``s`` in ``[0, dt]``. The first contact over all boxes is kept
     (ties: the lower box index). A contact counts only when the sphere moves into the surface;
@@ -109,7 +110,7 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
 
 def collide_box(position, velocity, radius, box: RoundedBox, dt: float, *, device=None,
                 precision: str = "float32", motion: str = "linear", gravity=None) -> Contacts:
-    """First contact of each moving sphere with one static rounded box (sheet method 1).
+    """First contact of each moving sphere with one static rounded box .
 
     The same contract as :func:`collide_boxes` with a group of one (``box`` is 0 or -1); one
     box needs no broad phase.
@@ -163,7 +164,7 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
            max_angular_speed: float = 50.0, energy_retention: float = 1.0, device=None,
            precision: str = "float32", broad_phase: str = "auto", motion: str = "linear",
            gravity=None) -> Bounces:
-    """Move each sphere for ``dt``, bouncing off the boxes (sheet method 3).
+    """Move each sphere for ``dt``, bouncing off the boxes .
 
     At each contact the velocity is reflected and the sphere goes on with the rest of its path,
     until nothing is hit or ``max_bounces`` contacts were taken; the broken line is exactly
@@ -171,7 +172,7 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
     sphere stays at its last contact with its reflected velocity. Each contact applies the
     friction torque to the angular momentum (``friction > 0``) and keeps ``energy_retention``
     of the kinetic energy (the speed and the rest of the path shrink by its square root). The
-    linear motion (the sheet's) moves in a straight line and has no gravity; the ballistic one
+    linear motion moves in a straight line and has no gravity; the ballistic one
     follows the parabolas of ``gravity`` for the frame's time (``velocity`` out is then the true
     velocity at the frame's end). See :class:`warpsim.Simulator` for whole frames. Inputs are
     never modified.

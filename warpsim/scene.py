@@ -13,11 +13,14 @@ DEFAULT_GRAVITY = (0.0, -9.81, 0.0)
 
 
 class Scene:
-    """Obstacles and physics settings (validated on construction; see SPEC "Dynamics").
+    """Obstacles and physics settings (validated on construction; the dynamics of a frame are
+    described in :class:`warpsim.Simulator` and the README's "What it models").
 
     Args:
         boxes: the static obstacles.
-        gravity: gravitational acceleration [m/s^2], world frame (y up).
+        gravity: gravitational acceleration [m/s^2], world frame; None: that of the stage the
+            boxes were read from (:func:`warpsim.obstacles_from_usd`), else ``(0, -9.81, 0)``
+            (y up).
         friction: friction coefficient ``k_f`` [kg/s] of ``F_f = -k_f v_t,rel``; 0 disables spin.
         energy_retention: fraction ``k`` in (0, 1] of kinetic energy kept at each contact.
         energy_correction: reset the speed from the energy invariant after each frame; when
@@ -33,15 +36,15 @@ class Scene:
         frames: default number of frames to simulate, >= 1.
         max_bounces: default cap of contacts per sphere per frame, in
             ``[1, warpsim.validation.MAX_BOUNCES]``.
-        motion: default motion model: ``"linear"`` (the sheet's: each frame's path is the
-            chord ``A -> A + v dt``) or ``"ballistic"`` (the exact parabola of each flight).
+        motion: default motion model: ``"linear"`` (each frame's path is the chord
+            ``A -> A + v dt``) or ``"ballistic"`` (the exact parabola of each flight).
         source: the file the scene was read from, if any.
 
     Raises:
         ValueError: naming the bad argument (the checks are :mod:`warpsim.validation`'s).
     """
 
-    def __init__(self, boxes: RoundedBoxes, gravity=DEFAULT_GRAVITY, friction: float = 0.0,
+    def __init__(self, boxes: RoundedBoxes, gravity=None, friction: float = 0.0,
                  energy_retention: float = 1.0, energy_correction: bool | None = None,
                  max_angular_speed: float = 50.0, *, name: str = "scene",
                  description: str = "", emitter=None, dt: float = 1.0 / 60.0,
@@ -49,6 +52,8 @@ class Scene:
                  source: str | None = None):
         if not isinstance(boxes, RoundedBoxes):
             raise ValueError(f"boxes must be a warpsim.RoundedBoxes, got {type(boxes).__name__}")
+        if gravity is None:  # a stage's own gravity, in its axes
+            gravity = getattr(getattr(boxes, "stage", None), "gravity", DEFAULT_GRAVITY)
         settings = check.scene_settings(dict(
             gravity=gravity, friction=friction, energy_retention=energy_retention,
             energy_correction=energy_correction, max_angular_speed=max_angular_speed, dt=dt,

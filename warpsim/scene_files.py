@@ -2,7 +2,10 @@
 
 The format is documented in the README ("Scene files"). In short: top-level ``name`` and
 ``description``, optional ``[simulation]`` and ``[physics]`` tables, obstacles as ``[[box]]`` and
-``[[box_grid]]`` tables, and one ``[emitter]`` table (see :class:`warpsim.emitter.Emitter`).
+``[[box_grid]]`` tables or an ``[obstacles]`` table naming a USD stage (``usd = "set.usda"``,
+relative to the scene file, and optionally ``prim = "/Set"``; read by
+:func:`warpsim.obstacles_from_usd`), and one ``[emitter]`` table (see
+:class:`warpsim.emitter.Emitter`).
 The raw values go to the same checks as the classes' arguments (:mod:`warpsim.validation`), named
 as the file names them. ``warpsim.Scene.load`` turns what :func:`read_scene_file` returns into a
 scene; this module does not import :mod:`warpsim.scene`.
@@ -35,13 +38,15 @@ MAX_GRID_BOXES = 100_000
 """Largest ``[[box_grid]]`` expansion accepted: far above any sensible scene, it turns a typo
 such as ``count = [1000, 1000, 1]`` into an error instead of an out-of-memory."""
 
-TOP_KEYS = ("name", "description", "simulation", "physics", "box", "box_grid", "emitter")
+TOP_KEYS = ("name", "description", "simulation", "physics", "box", "box_grid", "obstacles",
+            "emitter")
 SIMULATION_KEYS = ("dt", "frames", "max_bounces", "motion")
 PHYSICS_KEYS = ("gravity", "friction", "energy_retention", "energy_correction",
                 "max_angular_speed")
 BOX_KEYS = ("center", "half_extents", "rotation", "rotation_deg", "radius")
 BOX_GRID_KEYS = ("origin", "count", "spacing", "half_extents", "rotation", "rotation_deg",
                  "radius", "stagger", "stagger_axis")
+OBSTACLES_KEYS = ("usd", "prim")
 EMITTER_KEYS = tuple(f.name for f in fields(Emitter))
 AXES = ("x", "y", "z")
 TOP_LEVEL = "the top level"  # how messages name the file's root table
@@ -177,7 +182,7 @@ def _scene_arguments(data: dict, *, stem: str, source: str) -> dict:
                                     where="simulation.")
     settings.update(check.scene_settings(_table(data, "physics", PHYSICS_KEYS),
                                          where="physics."))
-    boxes = _boxes(data)
+    boxes = _stage_boxes(data, source) if "obstacles" in data else _boxes(data)
     if "emitter" not in data:
         raise ValueError("missing [emitter] table (its count is required)")
     emitter = Emitter.from_table(_table(data, "emitter", EMITTER_KEYS), where="emitter")
@@ -200,6 +205,26 @@ def _boxes(data: dict) -> RoundedBoxes:
     center, half, rotation, radius = (np.concatenate(column) for column in zip(*parts,
                                                                                 strict=True))
     return RoundedBoxes(center=center, half_extents=half, rotation=rotation, radius=radius)
+
+
+def _stage_boxes(data: dict, source: str) -> RoundedBoxes:
+    """The obstacles of the stage that ``[obstacles] usd`` names (relative to the scene file);
+    a stage scene's boxes are all the stage's, so ``[[box]]`` tables are refused beside it."""
+    table = _table(data, "obstacles", OBSTACLES_KEYS)
+    usd, prim = _require(table, "obstacles", "usd"), table.get("prim")
+    if not isinstance(usd, str) or not usd.strip():
+        raise ValueError(f"obstacles.usd must be the path of a USD file, got {usd!r}")
+    if prim is not None and not isinstance(prim, str):
+        raise ValueError(f"obstacles.prim must be a prim path such as '/Set', got {prim!r}")
+    if "box" in data or "box_grid" in data:
+        raise ValueError("[[box]] and [[box_grid]] tables cannot be mixed with [obstacles] usd: "
+                         "the obstacles are the stage's (add the boxes to the stage)")
+    from .export.stage_in import obstacles_from_usd  # pxr only for scenes that read a stage
+
+    try:
+        return obstacles_from_usd(Path(source).parent / usd, prim)
+    except (ValueError, FileNotFoundError) as exc:
+        raise ValueError(f"obstacles.usd: {exc}") from None
 
 
 def _shape(table: dict, where: str, center) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:

@@ -88,7 +88,7 @@ def plot(results: dict, path: Path) -> None:
     except ImportError as exc:
         raise ImportError('matplotlib is needed for the plot: pip install "warpsim[peers]"'
                           ) from exc
-    from .run import write_atomic
+    from warpsim.export.files import write_bytes
 
     fig, (left, right) = plt.subplots(1, 2, figsize=(12, 5.6), constrained_layout=True)
     for r in results["rows"]:
@@ -127,4 +127,4 @@ def plot(results: dict, path: Path) -> None:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=130)
     plt.close(fig)
-    write_atomic(Path(path), buf.getvalue())
+    write_bytes(path, buf.getvalue())

@@ -2,7 +2,7 @@
 
 ``python -m benchmarks.peers [--n N] [--repeats R] [--sample K] [--engines a,b] [--out DIR]
 [--quick]``, from the repository root. Writes ``DIR/peers.json``, ``DIR/peers.md`` and
-``DIR/peers.png`` (default ``DIR``: ``bench-results``), each atomically.
+``DIR/peers.png`` (default ``DIR``: ``benchmarks/results``), each atomically.
 
 For each speed (5 and 60 m/s) every available engine setting is built (timed: set-up, which
 includes compiling kernels for the Warp-based engines), then run once untimed from the start
@@ -17,9 +17,6 @@ compares medians of the same run. Every engine runs on one core.
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import platform
 import statistics
 import sys
 import time
@@ -27,10 +24,13 @@ from pathlib import Path
 
 import numpy as np
 
+from warpsim.export.files import write_bytes, write_json
+from warpsim.machine import machine
+
 from . import workload as wl
 from .engines import BASELINE, SETTINGS, unavailable, versions
 
-DEFAULT_OUT = "bench-results"
+DEFAULT_OUT = str(Path(__file__).resolve().parents[1] / "results")
 FULL = {"n": 1000, "repeats": 5, "sample": 32}
 QUICK = {"n": 100, "repeats": 1, "sample": 8}
 
@@ -75,19 +75,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     else:
         args.engines = keys
     return args
-
-
-def machine() -> dict:
-    """Where the figures come from: platform, CPU model, core count, Python."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in f
-                        if ln.startswith("model name")), cpu)
-    except OSError:
-        pass
-    return {"platform": platform.platform(), "python": platform.python_version(), "cpu": cpu,
-            "cores": os.cpu_count()}
 
 
 def measure(driver, work: wl.Workload, exact: np.ndarray | None, sample: int) -> dict:
@@ -199,14 +186,6 @@ def run(args: argparse.Namespace) -> dict:
             "rows": rows, "runtime_s": time.perf_counter() - began}
 
 
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same folder (the temporary
-    name keeps the extension), so a reader never sees a partial file."""
-    tmp = path.with_name(f"{path.stem}.tmp{path.suffix}")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
-
-
 def main(argv: list[str] | None = None) -> int:
     from .report import markdown, plot
 
@@ -220,8 +199,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     results = run(args)
     table = markdown(results)
-    write_atomic(out / "peers.json", json.dumps(results, indent=1).encode())
-    write_atomic(out / "peers.md", table.encode())
+    write_json(out / "peers.json", results)
+    write_bytes(out / "peers.md", table.encode())
     plot(results, out / "peers.png")
     print("\n" + table)
     print(f"\nruntime {results['runtime_s']:.0f} s; wrote {out / 'peers.json'}, "

@@ -25,6 +25,7 @@ from typing import Protocol
 import numpy as np
 
 import warpsim as ws
+from warpsim.energy import energy_scale, lowest_potential
 
 ROOM_HALF = np.array([2.0, 1.5, 2.0])
 """Half the inner size of the room [m]; the inner floor is the plane y = 0."""
@@ -224,7 +225,8 @@ def energy(work: Workload, position: np.ndarray, velocity: np.ndarray) -> np.nda
 
 
 def energy_drift(work: Workload, position: np.ndarray, velocity: np.ndarray) -> dict:
-    """Relative change of the total energy from the start, and the worst single sphere's.
+    """Relative change of the total energy from the start, and the worst single sphere's, on
+    the scale of :mod:`warpsim.energy` (each sphere's energy above the scene's lowest point).
 
     Spheres whose state is not finite are left out of both (they count as escaped).
     """
@@ -233,8 +235,10 @@ def energy_drift(work: Workload, position: np.ndarray, velocity: np.ndarray) -> 
     ok = np.isfinite(e1)
     if not ok.any():
         return {"total": None, "worst_sphere": None}
-    return {"total": float((e1[ok].sum() - e0[ok].sum()) / e0[ok].sum()),
-            "worst_sphere": float(np.max(np.abs(e1[ok] - e0[ok]) / e0[ok]))}
+    lowest = lowest_potential(work.gravity, work.boxes, work.position)
+    scale = energy_scale(e0, work.mass, lowest)[ok]
+    return {"total": float((e1[ok].sum() - e0[ok].sum()) / scale.sum()),
+            "worst_sphere": float(np.max(np.abs(e1[ok] - e0[ok]) / scale))}
 
 
 def reference_positions(work: Workload, sample: int, frames: int = ERROR_HORIZON_FRAMES):

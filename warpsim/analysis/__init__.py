@@ -6,9 +6,17 @@ against cost (:mod:`.accuracy`, whose plots need the ``plots`` extra, imported o
 ``simulate(scene, swarm, t_end, times)`` the reference's own motion.
 """
 
-from . import accuracy, error_report, reference
+from . import error_report, reference
 from .error_report import ErrorReport, compare
 from .reference import ReferenceRun, simulate
 
 __all__ = ["ErrorReport", "ReferenceRun", "accuracy", "compare", "error_report", "reference",
            "simulate"]
+
+
+def __getattr__(name):
+    if name == "accuracy":  # on first use: ``python -m warpsim.analysis.accuracy`` runs it
+        import importlib
+
+        return importlib.import_module(".accuracy", __name__)
+    raise AttributeError(f"module 'warpsim.analysis' has no attribute {name!r}")

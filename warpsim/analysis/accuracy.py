@@ -7,8 +7,7 @@ exact reference (:mod:`warpsim.analysis.reference`) with
 - ``linear float32`` / ``linear float64``: the step ``dt`` from 1/30 s to 1/960 s;
 - ``no correction float32`` / ``no correction float64``: the same without the energy reset;
 - ``max_bounces float32``: the bounce cap from 1 to 32 at dt = 1/60 s;
-- ``ballistic float32`` / ``ballistic float64``: the exact-arc motion model over ``dt``, when the
-  simulator accepts ``motion="ballistic"`` (skipped with a note otherwise).
+- ``ballistic float32`` / ``ballistic float64``: the exact-arc motion model over ``dt``.
 
 The error of a setting is the mean over the swarm of the position error at the error horizon
 (0.5 s by default; positions diverge exponentially later, see the error report). The mean, not
@@ -31,16 +30,16 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import os
-import platform
 import sys
-import tempfile
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
+from ..energy import lowest_potential
+from ..export.files import atomic_output, write_bytes, write_json
+from ..machine import machine
 from . import error_report
 from .reference import simulate
 
@@ -67,9 +66,6 @@ ORDER_FIT_FLOOR = 1e-12
 
 #: Errors below this [m] are drawn at it (an exact zero has no place on a log axis).
 PLOT_FLOOR = 1e-16
-
-#: Permissions of the files written (temporary files are created private).
-FILE_MODE = 0o644
 
 PLOTS_MISSING = 'matplotlib is needed for plots: pip install "warpsim[plots]" (or pass --no-plots)'
 
@@ -228,22 +224,12 @@ def _scene_with(scene, energy_correction: bool):
 
 
 def _simulator(scene, swarm, s: Setting, device):
-    """A simulator for a setting, or None when this simulator has no such motion model."""
+    """The simulator of a setting."""
     from ..simulator import Simulator
 
-    kwargs = dict(dt=s.dt, max_bounces=s.max_bounces, device=device, precision=s.precision)
-    if s.motion != "linear":
-        kwargs["motion"] = s.motion
-    try:
-        return Simulator(_scene_with(scene, s.energy_correction), swarm, **kwargs)
-    except TypeError:  # no motion keyword
-        if s.motion != "linear":
-            return None
-        raise
-    except ValueError as exc:  # a motion keyword without this model
-        if s.motion != "linear" and "motion" in str(exc):
-            return None
-        raise
+    return Simulator(_scene_with(scene, s.energy_correction), swarm, dt=s.dt,
+                     max_bounces=s.max_bounces, device=device, precision=s.precision,
+                     motion=s.motion)
 
 
 def _run(config: dict) -> int:
@@ -251,26 +237,18 @@ def _run(config: dict) -> int:
     swarm = scene.spawn(n=config["n"], seed=config["seed"])
     timing_swarm = scene.spawn(n=config["speed_n"], seed=config["seed"] + 1)
     g = np.asarray(scene.gravity, dtype=np.float64)
-    lowest = error_report.lowest_potential(scene, swarm.position)
+    lowest = lowest_potential(scene.gravity, scene.boxes, swarm.position)
     settings = settings_of(config, scene)
     notes: list[str] = []
     rows: list[dict] = []
     references: dict = {}
-    skipped_motion: set[str] = set()
     started = time.perf_counter()
     ref_seconds = 0.0
     device_used = str(config["device"])
     print(f"accuracy study: scene {scene.name!r}, {len(swarm)} spheres measured over "
           f"{config['horizon']:g} s, {len(settings)} settings", file=sys.stderr)
     for s in settings:
-        if s.motion in skipped_motion:
-            continue
         sim = _simulator(scene, swarm, s, config["device"])
-        if sim is None:
-            skipped_motion.add(s.motion)
-            notes.append(f"motion={s.motion!r} is not accepted by warpsim.Simulator here: "
-                         f"its curves are skipped")
-            continue
         frames = max(1, round(config["horizon"] / s.dt))
         times = np.arange(frames + 1) * s.dt
         key = (s.rate, s.motion)
@@ -315,9 +293,8 @@ def _run(config: dict) -> int:
         "families": families, "settings": rows, "notes": notes,
         "seconds": time.perf_counter() - started}
     out = config["out"]
-    _write_atomic(os.path.join(out, "accuracy.json"),
-                  json.dumps(error_report._plain(result), indent=1).encode())
-    _write_atomic(os.path.join(out, "accuracy.md"), markdown(result).encode())
+    write_json(os.path.join(out, "accuracy.json"), error_report._plain(result))
+    write_bytes(os.path.join(out, "accuracy.md"), markdown(result).encode())
     written = [os.path.join(out, "accuracy.json"), os.path.join(out, "accuracy.md")]
     if config["plots"]:
         written += plot(result, out)
@@ -479,58 +456,23 @@ def _log_ticks(ax, locator, formatter) -> None:
 
 
 def _save(fig, path: str) -> str:
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".accuracy.", suffix=".tmp.png", dir=folder)
-    os.close(fd)
-    try:
+    """The figure as a PNG at ``path``, written atomically."""
+    with atomic_output(path) as tmp:
         fig.savefig(tmp, format="png")
-        os.chmod(tmp, FILE_MODE)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
     return path
 
 
-def _write_atomic(path: str, data: bytes) -> None:
-    folder = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix=".accuracy.", suffix=".tmp.json", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.chmod(tmp, FILE_MODE)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
 def _machine(device: str) -> dict:
-    import warp as wp
-
-    versions = {"python": platform.python_version(), "numpy": np.__version__,
-                "warp": wp.config.version}
+    """:func:`warpsim.machine.machine`, the device the study ran on, and matplotlib's version
+    when it is there (the plots)."""
+    info = dict(machine(), device=device)
     try:
         import matplotlib
 
-        versions["matplotlib"] = matplotlib.__version__
+        info["matplotlib"] = matplotlib.__version__
     except ImportError:
         pass
-    return {"platform": platform.platform(), "processor": _cpu_model(),
-            "cpus": os.cpu_count(), **versions, "device": device}
+    return info
 
 
 def _print_summary(result: dict) -> None:

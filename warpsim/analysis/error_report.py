@@ -12,9 +12,10 @@ that do:
 - **time to divergence**: how long [s] until a sphere's position error first exceeds 1 mm and
   1 cm (spheres that never do count as "beyond the horizon");
 - **energy** of the sample against the reference at the horizon (relative to each sphere's
-  energy above the scene's lowest point): with lossy contacts this is the energy figure;
-- **invariants** of the whole run: energy drift (relative to each sphere's energy above the
-  scene's lowest point; none with lossy contacts, whose energy falls by design), spheres that
+  energy above the scene's lowest point, the scale of :mod:`warpsim.energy`): with lossy
+  contacts this is the energy figure;
+- **invariants** of the whole run: energy drift (:mod:`warpsim.energy`; none with lossy
+  contacts, whose energy falls by design), spheres that
   escaped (left the bounds of the obstacles and of the starting positions: in a closed room,
   went through a wall), spheres inside an obstacle (deeper than the run's rounding), spheres
   stopped by the bounce cap.
@@ -48,6 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import validation as check
+from ..energy import energy_scale, lowest_potential, region_bounds, relative_change
 from ..events import ContactEvents
 from ..scene import Scene
 from ..swarm import Swarm
@@ -236,7 +238,7 @@ def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, see
                                                   if len(sub) else 0.0)
     ref = simulate(scene, _with_velocity(sub, start), horizon, times)
     figures = measure(position, velocity, times, dt, g, motion, ref, contacts,
-                      lowest=lowest_potential(scene, swarm.position))
+                      lowest=lowest_potential(scene.gravity, scene.boxes, swarm.position))
     return ErrorReport(settings=settings, sample=idx, horizon=horizon,
                        contacts=figures["contacts"], position_error=figures["position_error"],
                        divergence=figures["divergence"], invariants=invariants,
@@ -258,8 +260,8 @@ def measure(position: np.ndarray, velocity: np.ndarray | None, times: np.ndarray
         ref: the reference for the same spheres, sampled at ``times``.
         contacts: contacts per sphere compared.
         lowest: the lowest potential energy per unit mass in the scene [J/kg] (see
-            :func:`lowest_potential`), the zero of the energy scale; None: the lowest over the
-            frames.
+            :func:`warpsim.energy.lowest_potential`), the zero of the energy scale; None: the
+            lowest over the frames.
 
     Returns:
         ``{"contacts", "position_error", "divergence", "energy"}`` (plain numbers); ``energy``
@@ -299,7 +301,7 @@ def measure(position: np.ndarray, velocity: np.ndarray | None, times: np.ndarray
     e_start = 0.5 * np.einsum("ki,ki->k", ref.velocity[0], ref.velocity[0]) - ref.position[0] @ g
     if lowest is None:
         lowest = float(np.min(-(ref.position[:, keep] @ g))) if keep.any() else 0.0
-    rel = (np.abs(e_run - e_ref) / np.maximum(e_start - lowest, 1e-12))[keep]
+    rel = (np.abs(e_run - e_ref) / energy_scale(e_start, 1.0, lowest))[keep]
     energy = {"time_s": float(times[-1]), **_stats(rel, "relative")}
     return {"contacts": contact_figs, "position_error": pos_err, "divergence": divergence,
             "energy": energy}
@@ -442,10 +444,7 @@ def match_contacts(found: ContactEvents, ref: ReferenceRun, spheres, k: int,
 def run_invariants(sim, scene: Scene, swarm: Swarm) -> dict:
     """Energy drift, escaped, inside and capped counts of a simulator's whole swarm now."""
     s = sim.state()
-    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
-    e = np.asarray(sim.mechanical_energy(s), dtype=np.float64)
-    scale = energy_scale(scene, swarm, e0, np.asarray(sim.energy_origin, dtype=np.float64))
-    drift = np.abs(e - e0) / scale
+    drift = np.abs(relative_change(sim, swarm.position, s))
     stats = sim.stats
     pos = s.position.astype(np.float64)
     lossy = scene.energy_retention < 1.0  # energy is lost by design: no drift to speak of
@@ -467,44 +466,11 @@ def trajectory_invariants(traj: Trajectory, scene: Scene) -> dict:
             "capped_spheres": None, "capped_sphere_frames": None}
 
 
-def lowest_potential(scene: Scene, start: np.ndarray, origin=(0.0, 0.0, 0.0)) -> float:
-    """The lowest potential energy per unit mass ``-g . (x - origin)`` [J/kg] over the corners
-    of the scene's region (obstacles and ``start`` positions)."""
-    g = np.asarray(scene.gravity, dtype=np.float64)
-    low, high = scene_bounds(scene, start)
-    start = np.asarray(start, dtype=np.float64)
-    if len(start):
-        low, high = np.minimum(low, start.min(axis=0)), np.maximum(high, start.max(axis=0))
-    corners = np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1])
-                        for z in (low[2], high[2])])
-    return float((-(corners - np.asarray(origin, dtype=np.float64)) @ g).min())
-
-
-def energy_scale(scene: Scene, swarm: Swarm, e0: np.ndarray, origin: np.ndarray) -> np.ndarray:
-    """Each sphere's energy above the scene's lowest point [J] (its largest possible kinetic
-    energy), the scale of "energy drift"; at least 1e-12 J."""
-    m = np.asarray(swarm.mass, dtype=np.float64)
-    return np.maximum(e0 - m * lowest_potential(scene, swarm.position, origin), 1e-12)
-
-
-def scene_bounds(scene: Scene, position: np.ndarray):
-    """World axis-aligned bounds [m] of the obstacles (of the spheres when there are none)."""
-    boxes = scene.boxes
-    if len(boxes):
-        ext = boxes.world_extent()
-        return (boxes.center - ext).min(axis=0), (boxes.center + ext).max(axis=0)
-    p = np.asarray(position, dtype=np.float64)
-    return p.min(axis=0), p.max(axis=0)
-
-
 def escaped(scene: Scene, position: np.ndarray, start: np.ndarray) -> int:
     """Spheres whose centre [m] is outside the scene's region: the world bounds of the
     obstacles and of the spheres' ``start`` positions together (for a closed room: spheres
     that went through a wall; in an open scene: that left it)."""
-    low, high = scene_bounds(scene, start)
-    start = np.asarray(start, dtype=np.float64)
-    if len(start):
-        low, high = np.minimum(low, start.min(axis=0)), np.maximum(high, start.max(axis=0))
+    low, high = region_bounds(scene.boxes, start)
     out = np.any((position < low) | (position > high), axis=1)
     return int(np.count_nonzero(out))
 
@@ -514,7 +480,7 @@ def inside(scene: Scene, position: np.ndarray, radius, precision: str) -> int:
     if not len(scene.boxes):
         return 0
     eps = np.finfo(np.float32 if precision == "float32" else np.float64).eps
-    low, high = scene_bounds(scene, position)
+    low, high = region_bounds(scene.boxes, np.zeros((0, 3)))  # the obstacles' bounds
     scale = max(1.0, float(np.abs(np.concatenate([low, high])).max()))
     depth = scene.boxes.signed_distance(position).min(axis=1) - np.asarray(radius)
     return int(np.count_nonzero(depth < -INSIDE_ULPS * eps * scale))

@@ -39,8 +39,8 @@ ball put on a floor stays there. A sphere that exceeds ``MAX_EVENTS`` contacts i
 happens.
 
 What is not modelled: spin. The model's friction changes only the angular momentum (translation
-is not changed by friction, SPEC "Spin"), and its spin update is defined per frame, so the
-reference computes no angular momentum and no orientation. Spheres never interact.
+is not changed by friction: it only turns the spin), and its spin update is defined per frame, so
+the reference computes no angular momentum and no orientation. Spheres never interact.
 
 Written independently of the kernels (NumPy only). Units: SI, [m], [s], [m/s].
 """

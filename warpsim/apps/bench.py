@@ -16,22 +16,16 @@ scripts in the repository's ``benchmarks/`` folder, not part of the package: see
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import sys
-import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import warp as wp
 
-from ..validation import PRECISIONS
-from ..vocabulary import BroadPhase, Motion
-
-BROAD_PHASES = tuple(BroadPhase)
-MOTIONS = tuple(Motion)
+from ..export.files import write_json
+from ..machine import machine
+from .options import add_simulation_options
 
 PROG = "warpsim bench"
 DESCRIPTION = ("The throughput of one scene on this machine: kernel build timed apart, one "
@@ -59,53 +53,10 @@ def _positive_int(text: str) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The options of ``warpsim bench``."""
     parser = _Parser(prog=PROG, description=DESCRIPTION)
-    parser.add_argument("scene", help="bundled scene name (see 'warpsim scenes') or a .toml path")
-    parser.add_argument("-n", "--count", type=_positive_int,
-                        help="number of spheres (default: the scene emitter's count)")
-    parser.add_argument("--frames", type=_positive_int,
-                        help="timed frames (default: the scene's frames)")
-    parser.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's)")
-    parser.add_argument("--precision", default="float32", choices=PRECISIONS)
-    parser.add_argument("--workers", type=_positive_int,
-                        help="CPU threads stepping the swarm (default: every core)")
-    parser.add_argument("--broad-phase", default="auto", choices=BROAD_PHASES,
-                        help="how each sphere finds its candidate boxes (default auto)")
-    parser.add_argument("--motion", choices=MOTIONS,
-                        help="motion model between contacts (default: the Simulator's)")
+    add_simulation_options(parser, integer=_positive_int,
+                           frames_help="timed frames (default: the scene's frames)")
     parser.add_argument("--json", metavar="PATH", help="also write the figures to this JSON file")
     return parser
-
-
-def machine(device=None) -> dict:
-    """Where figures come from: platform, CPU model, core count, Python, NumPy and Warp versions,
-    and the Warp device (``device``: a Warp device, or None for none)."""
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")),
-                       cpu)
-    except OSError:
-        pass
-    info = {"platform": platform.platform(), "python": platform.python_version(), "cpu": cpu,
-            "cores": os.cpu_count(), "numpy": np.__version__, "warp": wp.__version__}
-    if device is not None:
-        info.update(device=device.alias, device_name=device.name)
-    return info
-
-
-def write_json_atomic(path: Path, data: dict) -> None:
-    """Write ``data`` as JSON to ``path`` through a temporary file in the same folder, so that
-    the file is either the old one or the whole new one."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=1, default=float)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def _check_json_path(text: str) -> Path:
@@ -148,7 +99,6 @@ def measure(scene_name: str, count: int | None = None, frames: int | None = None
     Raises:
         ValueError: a bad scene, option or device, in one line.
     """
-    from .. import __version__
     from ..scene import Scene
     from ..simulator import Simulator
 
@@ -183,14 +133,18 @@ def measure(scene_name: str, count: int | None = None, frames: int | None = None
         "ns_per_sphere_frame": seconds / sphere_frames * 1e9,
         "bounces_per_sphere_frame": (last.bounces - first.bounces) / sphere_frames,
         "capped": last.capped - first.capped,
-        "versions": {"warpsim": __version__, "warp": wp.__version__, "numpy": np.__version__,
-                     "python": platform.python_version()},
         "machine": machine(sim.device)}
+
+
+def _commit(m: dict) -> str:
+    if m["commit"] is None:
+        return "unknown (not a git checkout)"
+    return m["commit"][:12] + (" with local changes" if m["dirty"] else "")
 
 
 def report(r: dict) -> str:
     """The figures of :func:`measure` as a few lines of text."""
-    m, v = r["machine"], r["versions"]
+    m = r["machine"]
     cache = {True: " (loaded from Warp's kernel cache)", False: " (compiled)", None: ""}
     motion = f", motion {r['motion']}" if r["motion"] is not None else ""
     return "\n".join([
@@ -205,8 +159,8 @@ def report(r: dict) -> str:
         f"{r['ns_per_sphere_frame']:.4g} ns per sphere-frame",
         f"{r['bounces_per_sphere_frame']:.4f} bounces per sphere-frame, "
         f"{r['capped']} sphere-frames capped",
-        f"warpsim {v['warpsim']}, warp {v['warp']}, numpy {v['numpy']}, python {v['python']}; "
-        f"{m['cpu']}, {m['cores']} cores, {m['platform']}"])
+        f"warpsim {m['warpsim']}, warp {m['warp']}, numpy {m['numpy']}, python {m['python']}; "
+        f"{m['cpu']}, {m['cores']} cores, {m['platform']}; commit {_commit(m)}"])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -223,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
                          broad_phase=args.broad_phase, motion=args.motion)
         print(report(result))
         if out is not None:
-            write_json_atomic(out, result)
+            write_json(out, result)
             print(f"figures written to {out}")
     except (ValueError, OSError) as exc:
         sys.stderr.write(f"{PROG}: error: {exc}\n")

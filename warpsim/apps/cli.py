@@ -15,8 +15,7 @@ import sys
 
 import numpy as np
 
-from ..validation import PRECISIONS
-from ..vocabulary import BroadPhase, Motion
+from .options import add_simulation_options
 from .startup import check_device, init_warp
 
 EXIT_ERROR = 1
@@ -24,8 +23,6 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 USD_SUFFIXES = (".usdc", ".usda")
 EVENTS_SUFFIXES = (".parquet",)
-#: Energy floors below this [J] are treated as zero when scaling relative energy figures.
-ENERGY_SCALE_FLOOR = 1e-30
 #: Default for ``run --velocities``: off. Measured (benchmarks/usd_write.py): velocities add
 #: 12 B per sphere-frame in .usdc (24 B with spin) to the 12 B of a non-spinning sphere's
 #: position, doubling the per-frame data of most bundled scenes (the default room run, 400
@@ -90,9 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     run = sub.add_parser("run", help="simulate a scene and write a USD animation")
-    run.add_argument("scene", help="bundled scene name (see 'warpsim scenes') or a .toml path")
-    run.add_argument("-n", "--count", type=int, help="number of spheres (default: the scene's)")
-    run.add_argument("--frames", type=int, help="frames to simulate (default: the scene's)")
+    add_simulation_options(run)
     run.add_argument("--start", type=int, default=0,
                      help="first frame written (the run still starts at frame 0)")
     run.add_argument("--end", type=int,
@@ -101,14 +96,6 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--dt", type=float, help="time step [s] (default: the scene's)")
     run.add_argument("--seed", type=int, help="emitter seed (default: the scene's)")
     run.add_argument("--max-bounces", type=int, help="contacts per sphere per frame")
-    run.add_argument("--device", help="Warp device, e.g. cpu or cuda:0 (default: Warp's)")
-    run.add_argument("--precision", default="float32", choices=PRECISIONS)
-    run.add_argument("--broad-phase", default=BroadPhase.AUTO, choices=tuple(BroadPhase),
-                     help="candidate boxes per sphere: every box, a BVH or a grid, or chosen "
-                          "from a cost model (same results)")
-    run.add_argument("--motion", choices=tuple(Motion),
-                     help="path within a frame: the chord or the exact parabola")
-    run.add_argument("--workers", type=int, help="CPU threads stepping the swarm")
     run.add_argument("-o", "--output", help="output .usdc or .usda (default: SCENE.usdc)")
     run.add_argument("--every", type=int, default=1, help="record one frame in EVERY")
     run.add_argument("--velocities", action=argparse.BooleanOptionalAction,
@@ -123,6 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="after the run, compare K spheres with the exact reference")
     run.add_argument("--max-bytes", type=float, default=2e9,
                      help="refuse (before simulating) a file estimated larger [bytes]")
+    run.add_argument("--rerun", metavar="RUN.rrd",
+                     help="also write a Rerun recording: timeline, contacts, energy plots "
+                          "(needs warpsim[viewer]; see 'warpsim view')")
+    run.add_argument("--rerun-sample", type=int, metavar="K",
+                     help="with --rerun: record only K of the written spheres, evenly spread")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.add_argument("--dask", nargs="?", const="local", metavar="ADDRESS",
                      help="run in shards on a Dask cluster: a LocalCluster here, or the "
@@ -149,6 +141,20 @@ def build_parser() -> argparse.ArgumentParser:
                       help="view height above the horizon [deg]")
     prev.add_argument("--no-progress", action="store_true", help="no progress bar (movie)")
 
+    view = sub.add_parser("view", help="open a .rrd, or a warpsim USD file, in the Rerun viewer "
+                                       "(needs warpsim[viewer]; analytics off)")
+    view.add_argument("file", help="a .rrd recording or a .usdc/.usda written by 'warpsim run'")
+    view.add_argument("--web", action="store_true",
+                      help="serve Rerun's web viewer on 127.0.0.1 instead of the native one")
+    view.add_argument("--port", type=int, default=0,
+                      help="with --web: the page's port (default: a free one)")
+    view.add_argument("--no-browser", action="store_true",
+                      help="with --web: print the address, do not open a browser")
+    view.add_argument("--every", type=int, default=1,
+                      help="USD files: one recorded frame in EVERY")
+    view.add_argument("--sample", type=int, metavar="K",
+                      help="USD files: only K spheres, evenly spread")
+
     sub.add_parser("bench", add_help=False,
                    help="measure throughput (see BENCHMARKS.md; 'warpsim bench --help')")
     sub.add_parser("accuracy", add_help=False,
@@ -166,33 +172,24 @@ def _cmd_scenes(_args) -> int:
     return 0
 
 
-def _energy_scale(sim) -> tuple[np.ndarray, np.ndarray]:
-    """Initial energies (N,) and each sphere's energy above the lowest point of the scene (N,),
-    the scale of relative energy figures (near 0: kept; 1: all of it) [J]."""
-    scene = sim.scene
-    g = scene.gravity
-    if len(scene.boxes) and np.any(g):
-        corners = scene.boxes.center + scene.boxes.bounding_radius()[:, None] * np.sign(g)
-        floor = corners[np.argmin(corners @ -g)]
-    else:
-        floor = sim.energy_origin
-    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
-    floor_potential = -sim.mass * ((floor - sim.energy_origin) @ g)
-    return e0, np.maximum(e0 - floor_potential, ENERGY_SCALE_FLOOR)
+def energy_line(sim, swarm, state) -> str:
+    """The summary's energy line, on the scale of :mod:`warpsim.energy`: the largest drift
+    (elastic scenes), or what the contacts took (``energy_retention < 1``: losing energy is the
+    model, not an error)."""
+    from ..energy import energy_scale, lowest_potential
 
-
-def energy_line(sim, state) -> str:
-    """The summary's energy line: the largest drift (elastic scenes), or what the contacts took
-    (``energy_retention < 1``: losing energy is the model, not an error)."""
-    e0, scale = _energy_scale(sim)
-    if not len(e0):
+    if not len(swarm):
         return "energy: no spheres"
-    energy = sim.mechanical_energy(state)
-    if sim.scene.energy_retention < 1.0:
+    scene = sim.scene
+    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
+    energy = np.asarray(sim.mechanical_energy(state), dtype=np.float64)
+    lowest = lowest_potential(scene.gravity, scene.boxes, swarm.position, sim.energy_origin)
+    scale = energy_scale(e0, sim.mass, lowest)
+    if scene.energy_retention < 1.0:
         lost = float(np.sum(e0 - energy) / np.sum(scale))
         gained = float(np.max((energy - e0) / scale))
-        line = (f"energy lost at contacts: {100.0 * lost:.1f}% of the energy above the lowest "
-                f"obstacle (energy_retention = {sim.scene.energy_retention:g})")
+        line = (f"energy lost at contacts: {100.0 * lost:.1f}% of the energy above the scene's "
+                f"lowest point (energy_retention = {scene.energy_retention:g})")
         return line + (f"; largest gain {gained:.2e} (relative)" if gained > 0.0 else "")
     drift = float(np.max(np.abs(energy - e0) / scale))
     return f"energy drift: {drift:.2e} (largest per sphere, relative)"
@@ -284,7 +281,17 @@ def _cmd_run(args) -> int:
     from ..export.files import check_writable
 
     scene = ws.Scene.load(args.scene)
-    if args.dask is not None or args.shards is not None or args.block is not None:
+    stage_set = getattr(scene.boxes, "stage", None)  # obstacles read from a USD stage
+    if stage_set is not None:
+        print(stage_set.summary(), file=sys.stderr)
+    sharded = args.dask is not None or args.shards is not None or args.block is not None
+    if sharded and stage_set is not None:
+        raise ValueError("--dask: a scene whose obstacles come from a USD stage runs unsharded "
+                         "(its result composes over the stage)")
+    if sharded and args.rerun is not None:
+        raise ValueError("--rerun does not run with --dask: open the sharded USD with "
+                         "'warpsim view OUT.usdc' (it converts it)")
+    if sharded:
         print(_run_sharded(args, scene))  # sharded: the spheres are drawn on the workers
         return 0
     swarm = scene.spawn(n=args.count, seed=args.seed)
@@ -294,6 +301,10 @@ def _cmd_run(args) -> int:
         raise ValueError("output path (-o) is empty")
     out = check_writable(args.output if args.output is not None else f"{scene.name}.usdc",
                          USD_SUFFIXES)
+    if stage_set is not None:
+        from ..export.compose import check_output
+
+        check_output(stage_set, out)
     if args.events is not None:
         from ..events import require_parquet
 
@@ -301,6 +312,10 @@ def _cmd_run(args) -> int:
         require_parquet()
     if args.error_sample is not None:
         check.positive_int("error_sample", args.error_sample)
+    if args.rerun is not None or args.rerun_sample is not None:
+        from ..export.rerun import check_run_options
+
+        check_run_options(args)
     options = _run_options(args)
     check_device(args.device, args.debug_mode)
     subset = None if args.spheres is None else sphere_selection(args.spheres, len(swarm))
@@ -320,13 +335,24 @@ def _cmd_run(args) -> int:
                          f"({n_written} spheres x {n_records} frames), above --max-bytes "
                          f"{args.max_bytes:,.0f}: record fewer frames (--every, --start/--end) "
                          f"or spheres (--spheres), or raise --max-bytes")
+    if args.rerun is not None:
+        from ..export.rerun import check_recording_size
+
+        check_recording_size(args, scene, n_written, n_records)
     print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "
           f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
           f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
     build = sim.build(events=bool(args.events))  # reported apart from the run's speed
     if start:
         sim.step(start)
-    traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
+    if args.rerun is not None:  # also samples the energy and the counters at each record
+        from ..export.rerun import run_with_scalars
+
+        traj, scalars = run_with_scalars(sim, end - start, every=every,
+                                         progress=not args.no_progress,
+                                         start=swarm.position, **options)
+    else:
+        traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
     state = sim.state()
     stats = sim.stats
     path = export.write_usd(out, scene, traj, spheres=subset, velocities=args.velocities,
@@ -336,7 +362,7 @@ def _cmd_run(args) -> int:
           f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
     print(f"bounces: {stats.bounces:,} ({stats.bounces / max(stats.sphere_frames, 1):.3f} per "
           f"sphere-frame); capped: {stats.capped:,} sphere-frames, {stats.capped_spheres} spheres")
-    print(energy_line(sim, state))
+    print(energy_line(sim, swarm, state))
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {len(traj)} frames "
           f"{int(traj.frame[0])}..{int(traj.frame[-1])}, {n_written} spheres)")
     if args.events is not None:
@@ -345,6 +371,11 @@ def _cmd_run(args) -> int:
         lost = (f"; {events.dropped:,} dropped: the buffer was full, raise --events-capacity"
                 if events.dropped else "")
         print(f"wrote {events_path} ({len(events):,} contacts{lost})")
+    if args.rerun is not None:
+        rrd = export.write_rerun(args.rerun, scene, traj, spheres=subset,
+                                 sample=args.rerun_sample, scalars=scalars)
+        print(f"wrote {rrd} ({rrd.stat().st_size / 1e6:.1f} MB Rerun recording; "
+              f"'warpsim view {rrd}' opens it)")
     if args.error_sample is not None:
         from ..analysis import error_report
 
@@ -393,7 +424,14 @@ def _cmd_accuracy(argv: list[str]) -> int:
     return accuracy.main(argv) or 0
 
 
-COMMANDS = {"run": _cmd_run, "scenes": _cmd_scenes, "preview": _cmd_preview}
+def _cmd_view(args) -> int:
+    from ..export.rerun_viewer import view
+
+    return view(args.file, web=args.web, port=args.port, open_browser=not args.no_browser,
+                stride=args.every, sample=args.sample)
+
+
+COMMANDS = {"run": _cmd_run, "scenes": _cmd_scenes, "preview": _cmd_preview, "view": _cmd_view}
 FORWARDED = {"bench": _cmd_bench, "accuracy": _cmd_accuracy}  # parse their own options
 
 

@@ -1,0 +1,65 @@
+"""Shared helpers of the tests (imported as ``helpers``): the devices to test on, a tolerance
+table per precision, and scenes built by hand."""
+
+import numpy as np
+import warp as wp
+
+import warpsim  # noqa: F401  (sets Warp's log level before anything initialises it)
+
+wp.init()
+
+DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
+
+#: Tolerances per precision. ``rel``: relative error of a computed length against a float64
+#: reference at unit scale (a few hundred ulps: the sweep chains ~20 roundings through a square
+#: root); ``t_abs``: absolute error of a contact fraction ``t``; ``unit``: deviation of a unit
+#: vector's length; ``angle``: normal direction error [rad].
+TOLERANCES = {
+    "float32": {"rel": 2e-5, "t_abs": 2e-5, "unit": 1e-6, "angle": 2e-3},
+    "float64": {"rel": 1e-11, "t_abs": 1e-11, "unit": 1e-13, "angle": 1e-7},
+}
+
+
+def closed_room(half: float, thickness: float = 0.5, center=(0.0, 0.0, 0.0)):
+    """Six sharp walls whose inner faces are the planes ``center +- half`` on each axis.
+
+    Each wall overhangs the room by ``thickness`` on its four sides, so everywhere a sphere
+    inside can touch it is the middle of a face (no edge, no corner of a wall is reachable).
+    """
+    import warpsim as ws
+
+    centers, halves = [], []
+    for axis in range(3):
+        for side in (-1.0, 1.0):
+            c = np.array(center, dtype=np.float64)
+            c[axis] += side * (half + thickness)
+            h = np.full(3, half + 2.0 * thickness)
+            h[axis] = thickness
+            centers.append(c)
+            halves.append(h)
+    return ws.RoundedBoxes(center=centers, half_extents=halves)
+
+
+def shaped_half_extents(rng, kind: str, low: float, high: float) -> np.ndarray:
+    """Random core half extents in [low, high] for a box ``kind``: "box" (all > 0), "plate"
+    (one zero), "stick" (two zeros), "point" (all zero) or "cube" (all equal)."""
+    h = rng.uniform(low, high, 3)
+    if kind == "plate":
+        h[rng.integers(3)] = 0.0
+    elif kind == "stick":
+        h[rng.choice(3, 2, replace=False)] = 0.0
+    elif kind == "point":
+        h[:] = 0.0
+    elif kind == "cube":
+        h[:] = h[0]
+    return h
+
+
+
+def with_velocity(swarm, velocity):
+    """``swarm`` with another velocity [m/s], (N, 3); everything else as it was."""
+    import warpsim as ws
+
+    return ws.Swarm(position=swarm.position, velocity=velocity, radius=swarm.radius,
+                    mass=swarm.mass, angular_momentum=swarm.angular_momentum,
+                    orientation=swarm.orientation)
