@@ -6,8 +6,8 @@ Prints three Markdown tables and writes their rows to JSON (default
 
 1. error against ``warpsim.analysis.reference`` (float64, event-driven, exact) of a swarm dropped
    onto tilted rounded plates (the bundled ``plates`` scene), after 0.5 s, at dt = 1/30 ... 1/240 s,
-   both precisions, for the ballistic model and (for scale) the linear one, the latter started
-   from the same true velocity (its state holds the step velocity ``u - g dt / 2``);
+   both precisions, for the ballistic model and (for scale) the linear one, both started from
+   the swarm's velocity (the velocity at t = 0 for both models);
 2. energy drift over 10 000 frames without any correction (ballistic, both precisions; the
    linear model without its reset beside it);
 3. cost: ns per sphere-frame in the standard room (``room``) at 5 and 60 m/s, linear against
@@ -56,14 +56,7 @@ def accuracy_rows(n: int) -> list[dict]:
         for precision in ("float64", "float32"):
             for dt in STEPS:
                 frames = round(HORIZON / dt)
-                start = swarm
-                if motion == "linear":
-                    # the linear state's velocity is semi-implicit Euler's step velocity: start
-                    # it from the same true velocity (u = v + g dt / 2), so that free flight is
-                    # exact and the error measured is the contacts'
-                    start = ws.Swarm(swarm.position, swarm.velocity - 0.5 * dt * scene.gravity,
-                                     radius=swarm.radius, mass=swarm.mass)
-                sim = ws.Simulator(scene, start, dt=dt, precision=precision, motion=motion,
+                sim = ws.Simulator(scene, swarm, dt=dt, precision=precision, motion=motion,
                                    max_bounces=16, device="cpu", workers=1)
                 sim.step(frames)
                 err = np.linalg.norm(sim.state().position.astype(np.float64)

@@ -2,23 +2,21 @@
 
 One command::
 
-    python benchmarks/rerun_write.py            # every bundled scene, 120 frames each
-    python benchmarks/rerun_write.py --quick    # 20 frames each (development)
+    python -m benchmarks.rerun_write            # every bundled scene, 120 frames each
+    python -m benchmarks.rerun_write --quick    # 20 frames each (development)
 
 For each bundled scene (its own sphere count and settings), simulates with contacts recorded
 and the per-frame figures sampled (:func:`warpsim.export.rerun.run_with_scalars`), writes the
 recording, and prints its size against :func:`warpsim.export.estimate_rerun_bytes`, the
 seconds to write it, and the simulation's wall time with the figures sampled against one plain
 ``Simulator.run`` (the sampling costs one launch per recorded frame). Writes
-``bench-results/rerun_write.json`` (``rerun_write-quick.json`` with ``--quick``). Needs the
+``benchmarks/results/rerun_write.json`` (``rerun_write-quick.json`` with ``--quick``). Needs the
 ``viewer`` extra.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import tempfile
 import time
 from pathlib import Path
@@ -27,7 +25,11 @@ import numpy as np
 
 import warpsim as ws
 from warpsim.export import estimate_rerun_bytes, write_rerun
+from warpsim.export.files import write_json
 from warpsim.export.rerun import run_with_scalars
+from warpsim.machine import machine
+
+from .common import RESULTS
 
 FRAMES = 120
 QUICK_FRAMES = 20
@@ -63,7 +65,7 @@ def measure(name: str, frames: int, folder: Path) -> dict:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="20 frames per scene")
-    parser.add_argument("--out", help="JSON path (default: bench-results/rerun_write.json, "
+    parser.add_argument("--out", help="JSON path (default: benchmarks/results/rerun_write.json, "
                                        "or rerun_write-quick.json)")
     args = parser.parse_args(argv)
     frames = QUICK_FRAMES if args.quick else FRAMES
@@ -78,10 +80,9 @@ def main(argv=None) -> int:
                   f"sampled {r['run_sampled_s']:.2f} s")
     worst = float(np.max(np.abs([r["error"] for r in rows])))
     print(f"largest estimate error: {worst:.1%}")
-    out = Path(args.out or f"bench-results/rerun_write{'-quick' if args.quick else ''}.json")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"machine": platform.platform(), "frames": frames, "rows": rows},
-                              indent=2))
+    out = Path(args.out) if args.out else RESULTS / (
+        f"rerun_write{'-quick' if args.quick else ''}.json")
+    write_json(out, {"machine": machine(), "frames": frames, "rows": rows})
     print(f"wrote {out}")
     return 0
 

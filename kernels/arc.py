@@ -341,47 +341,55 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
         ``F`` is convex outside its roots and concave between them. A start with ``F(left) <= 0``
         (only within rounding of a piece boundary) is a hit at ``left`` when ``F`` falls there.
 
+        The time origin moves to ``left`` first (``w(left + u) = w_l + u_l u + c2 u^2``): the
+        piece starts near the feature, so the coefficients are small there, while ``c0`` and
+        ``c1`` of a start far away would cancel in ``|c1|^2 + 2 c0.c2`` and misplace the convex
+        parts by ``eps |c0| / |c2|``.
+
         Returns:
             ``(found, s)``; a root where ``F`` does not fall (a tangent touch) is skipped.
         """
-        n, z1, z2 = quadratic_roots(SIX * wp.dot(c2, c2), SIX * wp.dot(c1, c2),
-                                    wp.dot(c1, c1) + TWO * wp.dot(c0, c2))
-        b1 = right
-        b2 = right
+        w_l = c0 + left * (c1 + left * c2)
+        u_l = c1 + (TWO * left) * c2
+        span = right - left
+        n, z1, z2 = quadratic_roots(SIX * wp.dot(c2, c2), SIX * wp.dot(u_l, c2),
+                                    wp.dot(u_l, u_l) + TWO * wp.dot(w_l, c2))
+        b1 = span
+        b2 = span
         if n == 2 and z1 < z2:
-            b1 = wp.min(wp.max(z1, left), right)
-            b2 = wp.min(wp.max(z2, left), right)
+            b1 = wp.min(wp.max(z1, ZERO), span)
+            b2 = wp.min(wp.max(z2, ZERO), span)
         found = int(0)
-        s_hit = right
-        lo = left
+        s_hit = span
+        lo = ZERO
         for part in range(3):
-            hi = right
+            hi = span
             if part == 0:
                 hi = b1
             elif part == 1:
                 hi = b2
             if found == 0 and hi >= lo:
-                f_lo, d_lo = gap_sq(c0, c1, c2, radius, lo)
+                f_lo, d_lo = gap_sq(w_l, u_l, c2, radius, lo)
                 if f_lo <= ZERO:
                     if d_lo < ZERO:
                         found = 1
                         s_hit = lo
                 elif hi > lo:
-                    f_hi, d_hi = gap_sq(c0, c1, c2, radius, hi)
+                    f_hi, d_hi = gap_sq(w_l, u_l, c2, radius, hi)
                     bracket = int(0)
                     b_hi = hi
                     if f_hi <= ZERO:
                         bracket = 1
                     elif part != 1 and d_lo < ZERO and d_hi > ZERO:
-                        bracket, b_hi = dip_below(c0, c1, c2, radius, lo, hi, tol)
+                        bracket, b_hi = dip_below(w_l, u_l, c2, radius, lo, hi, tol)
                     if bracket == 1:
-                        s_root = polish_root(c0, c1, c2, radius, lo, b_hi, tol)
-                        f_root, d_root = gap_sq(c0, c1, c2, radius, s_root)
+                        s_root = polish_root(w_l, u_l, c2, radius, lo, b_hi, tol)
+                        f_root, d_root = gap_sq(w_l, u_l, c2, radius, s_root)
                         if d_root < ZERO:
                             found = 1
                             s_hit = s_root
             lo = hi
-        return found, s_hit
+        return found, left + s_hit
 
     @wp.func
     def face_entry(c0: scalar, c1: scalar, c2: scalar, left: scalar, right: scalar):
@@ -390,6 +398,8 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
         The entering root is the one where ``q`` falls: the smaller of two for ``c2 > 0``, the
         larger for ``c2 < 0``; a double root is a tangent touch (no hit). A start with
         ``q(left) <= 0`` (rounding at a piece boundary) is a hit at ``left`` when ``q`` falls there.
+        The roots are those of ``q(left + u) = q_l + dq_l u + c2 u^2``, small coefficients near
+        the face (as in :func:`quartic_entry`).
         """
         found = int(0)
         s_hit = right
@@ -401,18 +411,18 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
         else:
             e = NONE
             if c2 == ZERO:
-                if c1 < ZERO:
-                    e = -c0 / c1
+                if dq_l < ZERO:
+                    e = -q_l / dq_l
             else:
-                n, r1, r2 = quadratic_roots(c2, c1, c0)
+                n, r1, r2 = quadratic_roots(c2, dq_l, q_l)
                 if n == 2 and r1 < r2:
                     if c2 > ZERO:
                         e = r1
                     else:
                         e = r2
-            if e >= left and e <= right:
+            if e >= ZERO and e <= right - left:
                 found = 1
-                s_hit = e
+                s_hit = left + e
         return found, s_hit
 
     @wp.func

@@ -1,15 +1,21 @@
 """Several bounces in one frame (the sheet's method 3): the per-sphere bounce loop.
 
-From its position the sphere follows its displacement for the frame; at the nearest contact it
+From its position the sphere follows the chord of its free-flight parabola for the frame, the
+displacement ``(u + g dt / 2) dt`` of its mean velocity (``u`` the velocity at the frame's
+start; without gravity the straight segment ``u dt``); at the nearest contact it
 reflects and goes on with the rest of the path, until nothing is hit or ``max_bounces`` contacts
 were taken. The broken line is exactly as long as the straight one (elastic contacts). When the
 cap is reached with path still to go, the sphere stays at its last contact (never inside, never
-through) with its reflected velocity, and is counted as capped.
+through) with its reflected velocity, and is counted as capped. The velocity at the frame's
+end is the (reflected) mean velocity plus the second half kick ``g dt / 2``: in free flight
+``u + g dt``, so the chord's ends lie on the exact parabola at every frame.
 
-Resting contacts: a contact whose approach speed is at most ``RESTING_FRAMES_*`` frames of
-gravity into the surface (``-v.n <= RESTING_FRAMES max(-g.n, 0) dt``) is a support, not a
-bounce: the normal part of the velocity and of the rest of the path is removed and the sphere
-slides on.
+Resting contacts: a contact whose approach speed (of the mean velocity ``w``) is at most
+``RESTING_FRAMES_*`` frames of gravity into the surface (``-w.n <= RESTING_FRAMES max(-g.n, 0)
+dt``) is a support, not a bounce: the normal part of the velocity and of the rest of the path is
+removed and the sphere slides on; at the frame's end its velocity into the support is removed
+too (it ends on the support, as it started: a sphere at rest has velocity 0, one sliding on a
+slope gains exactly ``g_t dt``).
 This is what keeps a sphere at rest on a floor without jitter or sinking; a bounce that small
 would rise less than ``2 g dt^2`` (5 mm at 60 Hz). A resting contact is inelastic: the frame
 kernel then takes the energy of the state it ends in (never more than before) instead of
@@ -49,6 +55,10 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
 
     Returns:
         Namespace with ``bounce_path``.
+
+    The event rows (``contact.contact_funcs``' ``write_event``) give the normal speed of the
+    velocity at the contact's time ``tau`` on the chord's parabola, ``-(w + g (tau - dt / 2)).n``
+    (``u + g tau`` in free flight), at least 0.
     """
     p = precision(features.precision)
     scalar, vec3 = p.scalar, p.vec3
@@ -73,24 +83,25 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
 
         The chord model reflects the whole rest of the frame's path, so a sub-frame hop (a
         sphere released just above a floor, or any bounce at a large ``dt``) would climb higher
-        than its energy can take it; the true parabola would not. Only the part of ``d`` against
-        gravity is cut, so the sideways motion is untouched, and the rise allowed leaves the
-        sideways kinetic energy of ``v`` (which gravity never changes) in place; without
-        gravity nothing is cut.
+        than its energy can take it; the true parabola would not. The highest point the energy
+        allows is where all of it but the sideways kinetic energy of ``v`` (which gravity never
+        changes) is potential: ``(E - Ep(contact) - 1/2 m |v_side|^2) / (m |g|)`` above the
+        contact. A rise beyond it (by more than the rounding of the energies) is cut, only along
+        gravity, so the sideways motion is untouched and the cut path ends at that height;
+        without gravity nothing is cut.
         """
         out = d
         g_len = wp.length(g)
         if g_len > ZERO:
+            down = g / g_len
+            side = v - wp.dot(v, down) * down
             ep_c = potential(m, g, contact, origin)
-            ep_end = potential(m, g, contact + d, origin)
-            if ep_end - energy > RESET_SLACK * (wp.abs(energy) + wp.abs(ep_end)):
-                down = g / g_len
-                side = v - wp.dot(v, down) * down
-                spare = energy - ep_c - HALF * m * wp.dot(side, side)
-                allowed = wp.max(spare, ZERO) / (m * g_len)
-                rise = -wp.dot(d, down)
-                if rise > allowed:
-                    out = d + (rise - allowed) * down
+            spare = energy - ep_c - HALF * m * wp.dot(side, side)
+            allowed = wp.max(spare, ZERO) / (m * g_len)
+            rise = -wp.dot(d, down)
+            slack = RESET_SLACK * (wp.abs(energy) + wp.abs(ep_c)) / (m * g_len)
+            if rise - allowed > slack:
+                out = d + (rise - allowed) * down
         return out
 
     @wp.func
@@ -100,27 +111,35 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
         """Move a sphere for one frame among the boxes, bouncing up to ``max_bounces`` times.
 
         Args:
-            a: centre at the start [m]. v: velocity for the frame [m/s]. r: radius [m].
+            a: centre at the start [m]. v: velocity at the frame's start [m/s] (the frame sweeps
+            its chord, mean velocity ``v + g dt / 2``). r: radius [m].
             m: mass [kg]. L: angular momentum [kg m^2/s]. energy: total energy [J] (see
             ``dynamics``). physics: the scene's constants (``data.model_structs``): gravity
-            (only for resting contacts and the loss's potential), the potential's origin,
-            ``dt``, friction, the ``|Rot|`` clamp, the retention and the cap on contacts this
-            frame (a launch value, not compiled in: the loop costs the same, and each cap would
-            be a build of its own). boxes, broad: the obstacles and the broad phase's data.
-            frame, sphere: what an event row names (frame within the launch, sphere index).
-            events: the event buffer (written only when built with ``events``).
+            (the chord's half kicks, resting contacts, the rise cut and the loss's potential),
+            the potential's origin, ``dt``, friction, the ``|Rot|`` clamp, the retention and the
+            cap on contacts this frame (a launch value, not compiled in: the loop costs the
+            same, and each cap would be a build of its own). boxes, broad: the obstacles and
+            the broad phase's data. frame, sphere: what an event row names (frame within the
+            launch, sphere index). events: the event buffer (written only when built with
+            ``events``).
 
         Returns:
-            ``(position, velocity, L, energy, bounces, capped, supported)``: ``bounces`` counts
+            ``(position, velocity, L, energy, bounces, capped, supported)``: ``velocity`` is the
+            one at the frame's end [m/s] (before any energy reset); ``bounces`` counts
             the contacts taken, ``capped`` is 1 when the cap stopped the sphere at its last
             contact, ``supported`` is 1 when one of them was a resting contact.
         """
         g = physics.gravity
         dt = physics.dt
-        d = v * dt
+        # the chord of the frame's free-flight parabola: its velocity is the frame's mean,
+        # u + g dt / 2 (the velocity at the frame's start plus half a kick)
+        half_kick = g * (HALF * dt)
+        w = v + half_kick
+        d = w * dt
         bounces = int(0)
         capped = int(0)
         supported = int(0)
+        support = vec3(ZERO, ZERO, ZERO)  # normal of the last resting contact
         done = int(0)
         travelled = ZERO  # fraction of the frame's path behind the sphere
         while done == 0:
@@ -134,8 +153,8 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
             else:
                 bounces += 1
                 contact = contact_centre(a, t, d, n, boxes.radius[box] + r, boxes.extent[box])
-                L = on_contact.spin(L, v, n, r, m, physics)
-                vn = wp.dot(v, n)
+                L = on_contact.spin(L, w, n, r, m, physics)
+                vn = wp.dot(w, n)
                 dn = wp.dot(d, n)
                 resting = -vn <= REST * wp.max(-wp.dot(g, n), ZERO) * dt
                 travelled = travelled + (ONE - travelled) * t
@@ -143,22 +162,34 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
                     gap = t * -dn
                     scale = wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))
                     resting = resting and gap <= GAP_ULPS * (scale + wp.length(d))
-                on_contact.event(frame, sphere, box, int(resting), contact, n, travelled, -vn,
-                                 events)
+                if wp.static(features.events):
+                    # the velocity at the contact's time on the chord's parabola (mean velocity
+                    # w, acceleration g), u + g tau: 0 for a sphere at rest on its support
+                    speed = -wp.dot(w + g * ((travelled - HALF) * dt), n)
+                    on_contact.event(frame, sphere, box, int(resting), contact, n, travelled,
+                                     wp.max(speed, ZERO), events)
                 if resting:
                     supported = 1
-                    v = v - vn * n
+                    support = n
+                    w = w - vn * n
                     d = (ONE - t) * (d - dn * n)
                 else:
-                    v = v - TWO * vn * n
+                    w = w - TWO * vn * n
                     d = (ONE - t) * (d - TWO * dn * n)
                     if wp.static(lossy):
                         energy = on_contact.loss(energy, m, contact, physics)
                         keep = on_contact.keep(physics)
-                        v = v * keep
+                        w = w * keep
                         d = d * keep
-                d = clip_rise(contact, d, v, m, g, physics.origin, energy)
+                d = clip_rise(contact, d, w, m, g, physics.origin, energy)
                 a = contact
+        # the velocity at the frame's end: the second half kick; a support takes its part into
+        # the surface (the sphere ends on it, its normal velocity 0, as at the frame's start)
+        v = w + half_kick
+        if supported == 1:
+            into = wp.dot(v, support)
+            if into < ZERO:
+                v = v - into * support
         return a, v, L, energy, bounces, capped, supported
 
     return SimpleNamespace(bounce_path=bounce_path)

@@ -96,7 +96,9 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
         The potential depends on the height only and gravity never changes the horizontal
         velocity, so the energy is restored through ``u . g_hat``, its sign kept: a ball on a
         flat frictionless floor keeps its horizontal speed. When the horizontal part alone holds
-        more than ``E - Ep``, the vertical part is dropped and the horizontal part scaled down.
+        more than ``E - Ep``, the vertical part is dropped and the horizontal part scaled down
+        (kept as it is when the excess is within the energies' rounding: a sphere at the top
+        of a cut hop keeps its horizontal speed bit for bit).
         Without gravity the whole velocity is scaled. ``E - Ep <= 0`` gives ``u = 0`` (never a
         NaN); a vertical part of exactly 0 is not raised (it has no sign to keep). A mismatch
         within the rounding of the energies (``RESET_ULPS``) leaves ``u`` bit for bit.
@@ -111,8 +113,8 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
         kinetic = energy - ep
         have = HALF * m * wp.dot(u, u)
         out = u
-        if wp.abs(kinetic - have) > RESET_SLACK * (wp.abs(energy) + wp.abs(ep)) and (
-                raise_ok == 1 or kinetic < have):
+        slack = RESET_SLACK * (wp.abs(energy) + wp.abs(ep))
+        if wp.abs(kinetic - have) > slack and (raise_ok == 1 or kinetic < have):
             if kinetic <= ZERO:
                 out = vec3(ZERO, ZERO, ZERO)
             else:
@@ -128,6 +130,8 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
                             if u_down < ZERO:
                                 size = -size
                             out = u_side + size * down
+                    elif side - kinetic <= slack:
+                        out = u_side  # at its energy height to rounding: the sideways part kept
                     else:
                         out = u_side * wp.sqrt(kinetic / side)
                 elif have > ZERO:

@@ -1,16 +1,16 @@
 """The frame kernel: one thread per sphere advances it by one or many time steps.
 
-Per sphere (SPEC "Dynamics of one frame"): gravity by semi-implicit Euler (``v += g dt``), the
-move by the bounce loop, the speed reset from the energy invariant, and the orientation from the
-rotation vector.
+Per sphere (SPEC "Dynamics of one frame"): the move (the bounce loop along the chord of the
+frame's free-flight parabola, or the ballistic loop along the parabola itself), the speed reset
+from the energy invariant, and the orientation from the rotation vector.
 
-Energy convention: the stored velocity ``v`` is semi-implicit Euler's step velocity (the one the
-last move used, the mean velocity over that frame); the velocity at the frame's end is
-``u = v + g dt / 2``, and the energy is ``E = 1/2 m |u|^2 - m g . (p - origin)``. Semi-implicit
-Euler conserves this ``E`` exactly in free flight (``E(x1, u1) - E(x0, u0) = 0`` identically), so
-the reset of ``|u|`` from ``E`` is the identity there: it corrects contact and rounding drift and
-nothing else. Resetting ``|v|`` itself (the sheet's literal rule) puts back ``1/2 m g^2 dt^2``
-every frame: balls hover at the top of their arc and free flight speeds up sideways.
+Velocity convention, both motion models: the stored velocity ``v`` is the velocity at the end of
+the state's frame (at t = 0 the swarm's own), and the energy is ``E = 1/2 m |v|^2 - m g . (p -
+origin)``. The linear frame moves from ``p`` to ``p + v dt + g dt^2 / 2`` (mean velocity ``v +
+g dt / 2``) and ends with ``v + g dt``: exactly the free-flight parabola at every frame, so the
+reset is the identity there (to rounding) and only corrects what contacts and rounding change.
+Resetting the mean velocity from ``E`` instead (the sheet's literal rule) would not be the
+identity in free flight: every flight would be disturbed, every frame.
 
 Variants come from :func:`frame_kernel`, keyed by what the scene needs, so a
 scene without spin runs a kernel with no spin code in it.
@@ -47,18 +47,18 @@ def frame_kernel(features: Features):
             way. ``lossy``: ``energy_retention < 1``. ``broad_phase``: how each sphere finds its
             candidate boxes (bit-identical results whichever). ``events``: write every contact
             into the launch's event buffer; without it no event code is compiled and the buffer
-            is not touched. ``motion``: ``"linear"``, the sheet's chord per frame (semi-implicit
-            Euler, the state's velocity is the step velocity), or ``"ballistic"``, the exact
-            parabola (``ballistic.ballistic_path``; the state's velocity is the true one). A
-            linear kernel contains no ballistic code and vice versa.
+            is not touched. ``motion``: ``"linear"``, the sheet's chord per frame
+            (``bounce.bounce_path``), or ``"ballistic"``, the exact parabola
+            (``ballistic.ballistic_path``); the state's velocity is the true one at the frame's
+            end for both. A linear kernel contains no ballistic code and vice versa.
 
     Kernel parameters beyond the model structs, the sphere constants and the state:
         frame_count: frames this launch advances (>= 0).
         record_every: record one frame in this many and the launch's last one (0: none).
         sphere_offset: index of the launch's first sphere in the swarm (event rows name it).
         record_position_out, record_orientation_out: (records, N) centres [m] and orientations.
-        record_velocity_out, record_angular_velocity_out: (records, N) true velocity at the
-            recorded frame [m/s] (``v + g dt / 2``) and world angular velocity ``Rot`` [rad/s];
+        record_velocity_out, record_angular_velocity_out: (records, N) velocity at the
+            recorded frame [m/s] (the state's) and world angular velocity ``Rot`` [rad/s];
             written only when the arrays have rows (a (0, N) array skips them).
         events_out: the event buffer; an event's frame is the frame within the launch, from 1.
     """
@@ -78,7 +78,6 @@ def frame_kernel(features: Features):
     rotation_vector = dyn.rotation_vector
     inertia = dyn.inertia
     integrate_orientation = dyn.integrate_orientation
-    HALF = scalar(0.5)
     ZERO = scalar(0.0)
     RESET_SLACK = scalar(RESET_ULPS * p.eps)
 
@@ -86,39 +85,36 @@ def frame_kernel(features: Features):
     def linear_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
                      physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
                      events: EventBuffer):
-        """One frame of the linear (chord) model; returns the state and the frame's counts."""
+        """One frame of the linear (chord) model; returns the state and the frame's counts.
+
+        ``v`` is the velocity at the frame's start, and the one at its end comes back; the
+        energy is that of it, which the chord keeps exactly in free flight, so the reset
+        changes nothing there and only removes drift.
+        """
         gravity = physics.gravity
         origin = physics.origin
-        dt = physics.dt
-        v = v + gravity * dt
         x, v, L, energy, bounces, capped, supported = path(x, v, r, m, L, energy, physics, boxes,
                                                           broad, frame, sphere, events)
-        # The energy is that of the velocity at the frame's end, v + g dt / 2 (the stored v is
-        # semi-implicit Euler's step velocity): semi-implicit Euler keeps that energy exactly
-        # in free flight, so the reset changes nothing there and only removes drift.
-        half_kick = gravity * (HALF * dt)
-        u = v + half_kick
         if supported == 1:
             # a resting contact is inelastic: keep the state and take its energy when that is
             # lower by more than rounding; never more: a state above E (rounding on a long
             # slide) has its speed scaled down, along the surface it slides on
             ep = potential(m, gravity, x, origin)
-            state_energy = kinetic_energy(m, u) + ep
+            state_energy = kinetic_energy(m, v) + ep
             slack = RESET_SLACK * (wp.abs(energy) + wp.abs(ep))
             if energy - state_energy > slack:
                 energy = state_energy
             elif state_energy - energy > slack:
-                have = kinetic_energy(m, u)
+                have = kinetic_energy(m, v)
                 kinetic = energy - ep
                 if kinetic <= ZERO or have <= ZERO:
-                    u = vec3(ZERO, ZERO, ZERO)
+                    v = vec3(ZERO, ZERO, ZERO)
                 else:
-                    u = u * wp.sqrt(kinetic / have)
-                v = u - half_kick
+                    v = v * wp.sqrt(kinetic / have)
         elif wp.static(energy_correction):
-            v = energy_along_gravity(u, energy, m, gravity, x, origin, 1) - half_kick
+            v = energy_along_gravity(v, energy, m, gravity, x, origin, 1)
         else:
-            v = energy_along_gravity(u, energy, m, gravity, x, origin, 0) - half_kick
+            v = energy_along_gravity(v, energy, m, gravity, x, origin, 0)
         if wp.static(spin):
             rot = rotation_vector(L, inertia(m, r), physics.max_rot)
             o = integrate_orientation(o, rot, physics.dt)
@@ -148,8 +144,6 @@ def frame_kernel(features: Features):
         return x, v, L, o, energy, bounces, capped
 
     one_frame = ballistic_frame if motion == "ballistic" else linear_frame
-    # the true velocity at a recorded frame: the linear state's step velocity plus half a kick
-    RECORD_KICK = HALF if motion == "linear" else ZERO
 
     @variant_kernel
     def advance_frames(
@@ -198,7 +192,6 @@ def frame_kernel(features: Features):
         capped = int(0)
         row = int(0)
         with_motion = record_velocity_out.shape[0] > 0
-        half_kick = physics.gravity * (RECORD_KICK * physics.dt)
         for f in range(frame_count):
             x, v, L, o, energy, b, c = one_frame(x, v, L, o, energy, r, m, physics, boxes, broad,
                                                  f + 1, sphere, events_out)
@@ -212,7 +205,7 @@ def frame_kernel(features: Features):
                     else:
                         record_orientation_out[row, i] = orientation_in[i]
                     if with_motion:
-                        record_velocity_out[row, i] = v + half_kick
+                        record_velocity_out[row, i] = v
                         if wp.static(spin):
                             record_angular_velocity_out[row, i] = rotation_vector(
                                 L, inertia(m, r), physics.max_rot)

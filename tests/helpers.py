@@ -1,6 +1,8 @@
 """Shared helpers of the tests (imported as ``helpers``): the devices to test on, a tolerance
 table per precision, and scenes built by hand."""
 
+import os
+
 import numpy as np
 import warp as wp
 
@@ -9,6 +11,18 @@ import warpsim  # noqa: F401  (sets Warp's log level before anything initialises
 wp.init()
 
 DEVICES = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
+
+#: The hypothesis profile conftest loads: ``ci`` (default, fixed examples) or ``wide``.
+HYPOTHESIS_PROFILE = os.environ.get("HYPOTHESIS_PROFILE", "ci")
+
+#: How many times more examples the ``wide`` profile draws than ``ci``.
+WIDE_FACTOR = 10
+
+
+def examples(count: int) -> int:
+    """``count`` hypothesis examples under the ``ci`` profile, ``WIDE_FACTOR`` times more under
+    ``wide`` (for a test's ``@settings(max_examples=...)``)."""
+    return count * (WIDE_FACTOR if HYPOTHESIS_PROFILE == "wide" else 1)
 
 #: Tolerances per precision. ``rel``: relative error of a computed length against a float64
 #: reference at unit scale (a few hundred ulps: the sweep chains ~20 roundings through a square
@@ -53,13 +67,3 @@ def shaped_half_extents(rng, kind: str, low: float, high: float) -> np.ndarray:
     elif kind == "cube":
         h[:] = h[0]
     return h
-
-
-
-def with_velocity(swarm, velocity):
-    """``swarm`` with another velocity [m/s], (N, 3); everything else as it was."""
-    import warpsim as ws
-
-    return ws.Swarm(position=swarm.position, velocity=velocity, radius=swarm.radius,
-                    mass=swarm.mass, angular_momentum=swarm.angular_momentum,
-                    orientation=swarm.orientation)

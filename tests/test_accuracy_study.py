@@ -5,13 +5,13 @@ import json
 
 import numpy as np
 import pytest
-from helpers import closed_room, with_velocity
+from helpers import closed_room
 
 import warpsim as ws
 from warpsim.analysis import accuracy, error_report, reference
 
-#: Measured order of convergence without the energy reset must lie in this band. Semi-implicit
-#: Euler is exact at frame times in free flight (from the model's own start velocity); at a floor
+#: Measured order of convergence without the energy reset must lie in this band. The linear
+#: model is exact at frame times in free flight (from the swarm's velocity); at a floor
 #: contact the chord sweep and the reflection of the frame's mean velocity leave an error of
 #: order g dt in the normal velocity: first order (measured here: 0.8 to 1.1 over seeds).
 ORDER_BAND = (0.7, 1.4)
@@ -30,13 +30,11 @@ def non_chaotic_scene(correction: bool):
 def measured_order(scene, swarm, rates) -> tuple[float, list[float]]:
     """Least-squares slope of log(mean position error over all frames of 1 s) against log(dt);
     averaging over frames evens out where in its frame each contact falls."""
-    g = np.asarray(scene.gravity)
     dts, errors = [], []
     for rate in rates:
         dt = 1.0 / rate
         times = np.arange(rate + 1) * dt
-        start = error_report.initial_velocity(swarm, dt, g, "linear")
-        ref = reference.simulate(scene, with_velocity(swarm, start), 1.0, times)
+        ref = reference.simulate(scene, swarm, 1.0, times)
         bounced = np.unique(ref.events.bounces().sphere)
         assert len(bounced) == len(ref.incomplete)  # every sphere bounces
         sim = ws.Simulator(scene, swarm, dt=dt, precision="float64")
@@ -51,7 +49,8 @@ def measured_order(scene, swarm, rates) -> tuple[float, list[float]]:
 def test_float64_kernels_converge_to_the_reference_in_dt(correction):
     scene = non_chaotic_scene(correction)
     rng = np.random.default_rng(7)
-    n = 32
+    n = 128  # each floor contact's error depends on where in its frame it falls: 32 spheres'
+    # mean scattered the no-reset order from 0.6 to 1.2 between starts, 128 hold it near 1
     swarm = ws.Swarm(position=rng.uniform(-1.2, 1.2, (n, 3)),
                      velocity=rng.normal(0.0, 3.0, (n, 3)), radius=0.1)
     order, errors = measured_order(scene, swarm, (60, 120, 240, 480))

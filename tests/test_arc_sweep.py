@@ -283,8 +283,17 @@ def test_grazing_arcs_are_consistent(precision):
     clear = 1e-3 if precision == "float32" else 1e-9
     assert not hit[eps > clear].any()
     assert hit[eps < -clear].all()
-    np.testing.assert_allclose(s[eps < -clear], s_apex, atol=0.25)
     assert np.all(s[hit == 1] <= s_apex * (1 + 1e-6))
+    # the clear dips enter where the 26-feature reference does, to the position error over
+    # the radial speed at the entry (a shallow entry's time is that ill-conditioned)
+    checked = 0
+    for k in np.nonzero(eps < -clear)[0]:
+        ref_hit, ref_s, ref_n = arc_contact_by_features(a[k], v[k], g, 0.5, H, RB)
+        assert ref_hit
+        radial = -np.dot(v[k] + g * ref_s, ref_n)
+        assert s[k] == pytest.approx(ref_s, abs=POSITION_REL[precision] * 2.0 / radial)
+        checked += 1
+    assert checked >= 50  # of the ~200 dips, those clear of rounding (|eps| > clear)
 
 
 # --- against the reference -------------------------------------------------------------------
@@ -320,18 +329,50 @@ def closest_approach(a, v, g, tau, h, radius):
     return float(min(f.min(), signed_distance(arc_point(a, v, g, 0.5 * (lo + hi)), h, radius)))
 
 
+def contact_case(rng, kind):
+    """A random arc built backwards from a chosen contact: ``P`` on the surface (the nearest
+    surface point in the direction of a random outside point), entering at least ``STEEP``
+    steeply at ``s*``. Before ``s*`` the arc's height over the supporting plane at ``P`` is
+    ``sigma (|u . n| + sigma g . n / 2)`` (``sigma = s* - s``): positive when ``g . n >= 0`` or
+    ``s* < 2 |u . n| / |g . n|``, so ``P`` is the first contact (None when that fails)."""
+    h = shaped_half_extents(rng, kind, 0.1, 1.0)
+    radius = rng.choice([0.0, 0.05, 0.3]) if kind != "point" else rng.uniform(0.1, 0.5)
+    g = rng.normal(0.0, 1.0, 3)
+    g *= 9.81 / np.linalg.norm(g)
+    y = rng.uniform(-2.0, 2.0, 3) * (h + radius + 0.1)
+    core = np.clip(y, -h, h)
+    if np.linalg.norm(y - core) == 0.0 or (radius == 0.0 and np.sum(y != core) > 1):
+        return None  # a sharp box is met on a face (its edges are lines: a touch, not a hit)
+    normal = (y - core) / np.linalg.norm(y - core)
+    point = core + radius * normal
+    tau = rng.uniform(0.2, 1.0)
+    s_star = tau * rng.uniform(0.2, 0.9)
+    u = rng.normal(0.0, 1.0, 3)
+    u -= (np.dot(u, normal) + rng.uniform(0.1, 2.0)) * normal  # going in
+    if -np.dot(u, normal) / np.linalg.norm(u) < 2.0 * STEEP:
+        return None
+    gn, un = np.dot(g, normal), np.dot(u, normal)
+    if gn < 0.0 and s_star >= 2.0 * abs(un) / abs(gn):
+        return None
+    a, v = built_backwards(point, normal, u, s_star, g)
+    return h, radius, a, v, g, tau
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("speed", [1.0, 1e3, 1e-3], ids=["normal", "fast", "slow"])
 def test_random_arcs_match_reference(speed, precision):
     """Random boxes (boxes, plates, sticks, points; sharp and rounded), starts outside, any
     gravity direction: the kernel agrees with the 26-feature reference on hit or miss (clear
-    cases), the contact point and the normal."""
+    cases), the contact point and the normal. Two cases in three are built backwards from a
+    chosen contact (so most cases hit), the others aimed around the box (hits and misses)."""
     rng = np.random.default_rng({1.0: 1, 1e3: 2, 1e-3: 3}[speed])
     kinds = ["box", "plate", "stick", "point", "cube"]
     cases = []
     while len(cases) < 60:
-        case = random_case(rng, kinds[len(cases) % len(kinds)],
-                           speed_scale=1.0 if speed == 1.0 else 1.0)
+        kind = kinds[len(cases) % len(kinds)]
+        case = random_case(rng, kind) if len(cases) % 3 == 2 else contact_case(rng, kind)
+        if case is None:
+            continue
         h, radius, a, v, g, tau = case
         if speed != 1.0:  # same paths, at 1e3 or 1e-3 times the speed (time scaled)
             tau, v, g = tau / speed, v * speed, g * speed * speed
@@ -340,7 +381,7 @@ def test_random_arcs_match_reference(speed, precision):
         radius = float(as_precision(radius, precision))
         if signed_distance(a, h, radius) > 0.05:
             cases.append((h, radius, a, v, g, tau))
-    checked_hits = 0
+    checked_hits = checked_misses = 0
     for h, radius, a, v, g, tau in cases:
         hit, s, n = local_sweep(h, radius, a, v, g, tau, precision)
         ref_hit, ref_s, ref_n = arc_contact_by_features(a, v, g, tau, h, radius)
@@ -359,7 +400,8 @@ def test_random_arcs_match_reference(speed, precision):
         elif closest_approach(a, v, g, tau, h, radius) > CLEAR_MISS_REL * scale:
             assert hit[0] == 0, (h, radius, a, v, g, tau)
             assert s[0] == np.float32(tau) if precision == "float32" else s[0] == tau
-    assert checked_hits >= 15
+            checked_misses += 1
+    assert checked_hits >= 40 and checked_misses >= 5
 
 
 @pytest.mark.slow

@@ -1,12 +1,12 @@
 """The error report (``warpsim.analysis.compare``) on tiny runs, checked against analytic
-answers: free flight is exact for semi-implicit Euler from the model's own start velocity, and a
-floor bounce's contact time is known in closed form."""
+answers: free flight is exact for both motion models from the swarm's velocity (the velocity at
+t = 0), and a floor bounce's contact time is known in closed form."""
 
 import json
 
 import numpy as np
 import pytest
-from helpers import closed_room, with_velocity
+from helpers import closed_room
 
 import warpsim as ws
 from warpsim.analysis import error_report, reference
@@ -20,7 +20,8 @@ def floor_scene(**kw):
 
 
 def test_free_flight_has_no_error_but_rounding(device):
-    """From v + g dt / 2 at t = 0, semi-implicit Euler hits the parabola at every frame."""
+    """From the swarm's velocity at t = 0 the linear model's chords end on the parabola at
+    every frame: the report sees rounding only."""
     scene = floor_scene()
     swarm = ws.Swarm(position=[[0.0, 5.0, 0.0], [1.0, 8.0, 0.0]],
                      velocity=[[1.0, 2.0, 0.0], [-0.5, 0.0, 0.3]], radius=0.05)
@@ -33,7 +34,6 @@ def test_free_flight_has_no_error_but_rounding(device):
     assert "1 s" not in rep.position_error  # the run does not reach it
     assert rep.contacts["compared"] == 0
     assert rep.divergence["1 mm"]["diverged"] == 0 and rep.divergence["1 mm"]["median_s"] is None
-    assert rep.settings["convention_offset_m_per_s"] == pytest.approx(0.5 * G / 60)
 
 
 @pytest.mark.slow
@@ -52,11 +52,9 @@ def test_floor_bounce_contact_time_and_error_figures(device):
     assert len(rep.sample) == 4 and len(set(rep.sample.tolist())) == 4
     c = rep.contacts
     assert c["compared"] == 4 and c["mismatched_spheres"] == 0
-    # the reference's own contact is at the analytic time (start velocity g dt / 2 downwards)
-    ref = reference.simulate(scene, with_velocity(
-        swarm, error_report.initial_velocity(swarm, dt, scene.gravity, "linear")), 1.0)
-    u0 = 0.5 * G * dt
-    t_hit = (-u0 + np.sqrt(u0 ** 2 + 2 * G * h)) / G
+    # the reference's own contact is at the analytic time (released at rest)
+    ref = reference.simulate(scene, swarm, 1.0)
+    t_hit = np.sqrt(2 * h / G)
     assert abs(ref.events.of_sphere(0).time[0] - t_hit) < 1e-12
     assert c["time_error_max_s"] < dt
     assert c["position_error_max_m"] < G * t_hit * dt
@@ -151,7 +149,6 @@ def test_ballistic_run_agrees_with_the_reference_at_every_step_size(device):
         sim.run(round(0.5 / dt))
         rep = error_report.compare(sim, scene, swarm, sample=24)
         assert rep.settings["motion"] == "ballistic"
-        assert rep.settings["convention_offset_m_per_s"] == 0.0
         assert rep.position_error["0.5 s"]["max_m"] < 1e-7
         if rep.contacts["compared"]:
             assert rep.contacts["time_error_max_s"] < 1e-7

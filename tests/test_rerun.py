@@ -427,6 +427,7 @@ def test_view_web_serves_the_guarded_page_of_a_usd_file(run, tmp_path, monkeypat
     assert "connect-src 'self' http://127.0.0.1:" in policy
 
 
+@pytest.mark.slow
 def test_readme_viewer_commands_run(tmp_path, monkeypatch, capsys):
     """The README's viewer commands, as printed: the run writes both files; ``view --web``
     serves them (the browser it would open and the wait for Ctrl-C are stood in for)."""

@@ -61,6 +61,7 @@ def hue_share(image: Image.Image, colors: np.ndarray) -> float:
     return float(np.mean(near & (hsv[..., 1] > 0.35) & (hsv[..., 2] > 0.25)))
 
 
+@pytest.mark.slow
 def test_web_viewer_loads_the_recording_in_headless_chromium(tmp_path):
     executable = chromium_path()
     if executable is None:

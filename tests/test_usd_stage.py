@@ -250,6 +250,7 @@ quaternion = st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).filter(
     lambda q: np.linalg.norm(q) > 0.1)
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(local_q=quaternion, world_q=quaternion,
        half=st.lists(st.floats(0.01, 5.0), min_size=3, max_size=3),
@@ -287,6 +288,7 @@ def test_any_box_mesh_in_any_rigid_transform_is_read(tmp_path_factory, local_q, 
     assert_same_points(got, expected, atol=16.0 * rounding + 1e-12 * np.abs(shift).max())
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
 @given(world_q=quaternion, scale=st.lists(st.floats(0.05, 20.0), min_size=3, max_size=3),
        shear=st.floats(0.01, 1.0), axis=st.integers(0, 2))
@@ -351,6 +353,7 @@ def test_rigid_bodies_earth_gravity_and_usds_fallback_units(tmp_path):
     assert boxes.stage.gravity == (9.81, 0.0, 0.0)
 
 
+@pytest.mark.slow
 def test_importing_warpsim_does_not_load_pxr():
     code = ("import sys, warpsim; assert 'pxr' not in sys.modules; "
             "assert 'obstacles_from_usd' in warpsim.__all__; warpsim.obstacles_from_usd; "
@@ -560,6 +563,7 @@ def test_files_near_the_origin_have_no_origin_op(tmp_path):
     np.testing.assert_array_equal(read_usd(out).position, traj.position.astype(np.float32))
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None)
 @given(center=st.lists(st.floats(-1e7, 1e7), min_size=3, max_size=3),
        spread=st.floats(0.0, 300.0), seed=st.integers(0, 100))

@@ -85,8 +85,8 @@ class DeviceState:
 
     Attributes:
         position: centres [m], world frame, shape (N,) of vec3.
-        velocity: velocities [m/s], shape (N,) of vec3 (for the linear model semi-implicit
-            Euler's step velocity; see ``kernels.frame_kernel``).
+        velocity: velocities at the end of the state's frame [m/s], shape (N,) of vec3 (see
+            ``kernels.frame_kernel``).
         energy: total energy [J], shape (N,) (see ``kernels.frame_kernel``).
         angular_momentum: [kg m^2/s], world frame, shape (N,) of vec3.
         orientation: unit quaternions (x, y, z, w), body -> world, shape (N,) of quat.

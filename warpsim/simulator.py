@@ -31,15 +31,13 @@ class State:
     Attributes:
         frame: frames advanced since the start.
         position: centres [m], (N, 3).
-        velocity: [m/s], (N, 3). Linear model: semi-implicit Euler's step velocity, the one the
-            last frame moved with (its mean velocity), and the one the next frame's gravity
-            kick adds to; the velocity at the frame's end is ``velocity + g dt / 2``. Ballistic
-            model: the true velocity at the frame's end.
+        velocity: the velocity at the end of the state's frame [m/s], (N, 3), for both motion
+            models (at frame 0 the swarm's own): a swarm built from this state moves on as the
+            simulator does.
         angular_momentum: [kg m^2/s], (N, 3). orientation: (x, y, z, w), body -> world, (N, 4).
-        energy: total energy ``1/2 m |u|^2 - m g . (p - origin)`` [J], (N,), with ``u`` the
-            velocity at the frame's end (``v + g dt / 2`` for the linear model, ``v`` for the
-            ballistic one): the per-sphere invariant (see :attr:`Simulator.energy_origin`),
-            constant but for the contact losses and the hops a support removes.
+        energy: total energy ``1/2 m |v|^2 - m g . (p - origin)`` [J], (N,): the per-sphere
+            invariant (see :attr:`Simulator.energy_origin`), constant but for the contact losses
+            and the hops a support removes.
     """
 
     frame: int
@@ -93,8 +91,10 @@ MIN_SHARD_SPHERES = 256
 class Simulator:
     """Advances a swarm among a scene's static obstacles, many frames per kernel launch.
 
-    Each frame, per sphere: ``v += g dt`` (semi-implicit Euler), the multi-bounce move of
-    ``v dt`` (contacts reflect; friction spins; ``energy_retention`` losses), the speed reset
+    Each frame, per sphere (linear model): the multi-bounce move along the chord of the
+    free-flight parabola, ``(v + g dt / 2) dt`` (contacts reflect; friction spins;
+    ``energy_retention`` losses), ending with the velocity ``v + g dt`` in free flight (``v``
+    the velocity at the frame's start: the swarm's is the velocity at t = 0), the speed reset
     from the energy invariant (``scene.energy_correction``), and the orientation step from the
     rotation vector. The kernel is built for what the scene needs: no spin code when friction is
     0 and no sphere spins, no loss code when ``energy_retention = 1``, no reset when the
@@ -167,7 +167,6 @@ class Simulator:
         self.mass = swarm.mass.copy()
         """Sphere masses [kg], (N,), float64."""
         self._seconds = 0.0
-        self._half_kick = 0.5 * self.dt if self.motion == "linear" else 0.0
         # what the kernel is built for (the factory's cache key)
         self._features = Features(precision=self.precision, motion=self.motion,
                                   broad_phase=self.broad_phase, spin=self.spin,
@@ -388,9 +387,8 @@ class Simulator:
                           events=_contact_events(gathered, dropped, self.dt) if events else None)
 
     def _motion_now(self) -> tuple[np.ndarray, np.ndarray]:
-        """True velocity [m/s] and world angular velocity [rad/s] of the current state."""
+        """Velocity [m/s] and world angular velocity [rad/s] of the current state."""
         s = self.state()
-        u = s.velocity + (self._half_kick * self.scene.gravity).astype(s.velocity.dtype)
         inertia = 0.4 * self.mass * self._radius_host ** 2
         rot = np.zeros_like(s.angular_momentum)
         if self.spin:
@@ -400,7 +398,36 @@ class Simulator:
             limit = self.scene.max_angular_speed
             over = size > limit
             rot[over] *= (limit / size[over])[:, None]
-        return u, rot.astype(s.angular_momentum.dtype)
+        return s.velocity, rot.astype(s.angular_momentum.dtype)
+
+    def set_state(self, state: State) -> None:
+        """Continue from ``state`` (one of :meth:`state`'s, of this simulator or of one built
+        alike): the run then goes on bit for bit as if it had never stopped.
+
+        A new simulator built from a :class:`Swarm` of the state's position and velocity moves
+        on the same way but for the energy invariant, which it computes again from the state
+        (equal to the carried one to rounding, less what losses and supports removed); this
+        method carries it, with the frame count.
+
+        Raises:
+            ValueError: a field of the wrong shape or not finite, naming it.
+        """
+        if not isinstance(state, State):
+            raise ValueError(f"state must be a warpsim.State, got {type(state).__name__}")
+        n = self._n
+        values = {"position": check.vec3_array("state.position", state.position, n),
+                  "velocity": check.vec3_array("state.velocity", state.velocity, n),
+                  "energy": check.per_item("state.energy", state.energy, n),
+                  "angular_momentum": check.vec3_array("state.angular_momentum",
+                                                       state.angular_momentum, n),
+                  # checked, but uploaded as given: normalising again would move its last bits
+                  "orientation": np.asarray(state.orientation, dtype=np.float64)}
+        check.unit_quat_array("state.orientation", state.orientation, n)
+        frame = check.positive_int("state.frame", state.frame, minimum=0)
+        self.state_0 = put_state(self._p, self.device, **values)
+        unwritten = () if self.spin else ("angular_momentum", "orientation")
+        self.state_1 = self.state_0.empty_like(share=unwritten)
+        self.frame = frame
 
     # -- read-out -----------------------------------------------------------------------------
 
@@ -423,17 +450,15 @@ class Simulator:
     def mechanical_energy(self, state: State | None = None) -> np.ndarray:
         """Total energy of a state [J], (N,), computed in float64 from its position and velocity.
 
-        ``1/2 m |u|^2 - m g . (p - origin)`` with ``u`` the velocity at the frame's end
-        (``v + g dt / 2`` for the linear model, ``v`` for the ballistic one; see
-        :class:`State`); compare with :attr:`initial_energy`.
+        ``1/2 m |v|^2 - m g . (p - origin)`` (see :class:`State`); compare with
+        :attr:`initial_energy`.
         """
         s = self.state() if state is None else state
         return self._energy_of(s.position.astype(np.float64), s.velocity.astype(np.float64))
 
     def _energy_of(self, position: np.ndarray, velocity: np.ndarray) -> np.ndarray:
         g = self.scene.gravity
-        u = velocity + self._half_kick * g
-        return (0.5 * self.mass * np.einsum("ij,ij->i", u, u)
+        return (0.5 * self.mass * np.einsum("ij,ij->i", velocity, velocity)
                 - self.mass * ((position - self.energy_origin) @ g))
 
     @property

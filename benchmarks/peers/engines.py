@@ -24,11 +24,11 @@ class Setting:
     make: Callable[[Workload], object]
 
 
-def _warpsim(precision: str):
+def _warpsim(precision: str, motion: str = "linear"):
     def make(work: Workload):
         from .warpsim_driver import WarpsimDriver
 
-        return WarpsimDriver(work, precision=precision)
+        return WarpsimDriver(work, precision=precision, motion=motion)
     return make
 
 
@@ -65,6 +65,8 @@ def _newton(speculative: bool):
 SETTINGS = (
     Setting("warpsim-float32", None, _warpsim("float32")),
     Setting("warpsim-float64", None, _warpsim("float64")),
+    Setting("warpsim-ballistic-float32", None, _warpsim("float32", "ballistic")),
+    Setting("warpsim-ballistic-float64", None, _warpsim("float64", "ballistic")),
     Setting("numpy-discrete", None, _numpy),
     Setting("pybullet", "pybullet", _pybullet(False)),
     Setting("pybullet-ccd", "pybullet", _pybullet(True)),

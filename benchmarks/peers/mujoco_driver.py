@@ -58,6 +58,9 @@ class MujocoDriver:
         speculative: enable speculative contacts (ValueError on a MuJoCo without them).
     """
 
+    #: ``state()``'s velocity is semi-implicit Euler's step velocity (the mean over the last step)
+    step_velocity = True
+
     def __init__(self, work: Workload, speculative: bool = False):
         import mujoco
 

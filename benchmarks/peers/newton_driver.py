@@ -44,6 +44,9 @@ class NewtonDriver:
             ``DEFAULT_GAP``.
     """
 
+    #: ``state()``'s velocity is semi-implicit Euler's step velocity (the mean over the last step)
+    step_velocity = True
+
     def __init__(self, work: Workload, speculative: bool = False):
         import newton
         import warp as wp

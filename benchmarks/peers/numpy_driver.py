@@ -61,6 +61,9 @@ class NumpyDriver:
     key = "numpy-discrete"
     label = "NumPy discrete"
 
+    #: ``state()``'s velocity is semi-implicit Euler's step velocity (the mean over the last step)
+    step_velocity = True
+
     def __init__(self, work: Workload):
         self._work = work
         self._rot = work.boxes.rotation_matrices()       # (K, 3, 3) local -> world

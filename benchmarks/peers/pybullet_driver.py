@@ -66,6 +66,9 @@ class PybulletDriver:
         ccd: Bullet's swept-sphere continuous collision detection on the spheres.
     """
 
+    #: ``state()``'s velocity is semi-implicit Euler's step velocity (the mean over the last step)
+    step_velocity = True
+
     def __init__(self, work: Workload, ccd: bool = False):
         p = pybullet_module()
         self.key = "pybullet-ccd" if ccd else "pybullet"

@@ -94,7 +94,8 @@ def measure(driver, work: wl.Workload, exact: np.ndarray | None, sample: int) ->
     out = {"measure_run_s": seconds,
            "escaped": int(wl.escaped(position).sum()),
            "inside": int(wl.inside_obstacle(work, position).sum()),
-           "energy_drift": wl.energy_drift(work, position, velocity),
+           "energy_drift": wl.energy_drift(work, position, velocity,
+                                           driver.step_velocity),
            "error": None}
     if exact is not None and sample > 0:
         out["error"] = wl.reference_error(np.stack(recorded), exact[: horizon + 1],

@@ -209,29 +209,34 @@ def inside_obstacle(work: Workload, position: np.ndarray) -> np.ndarray:
     return out
 
 
-def energy(work: Workload, position: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+def energy(work: Workload, position: np.ndarray, velocity: np.ndarray,
+           step_velocity: bool = True) -> np.ndarray:
     """Per-sphere total energy [J], (N,), with the floor (y = 0) as the zero of height.
 
-    ``1/2 m |u|^2 - m g . p`` with ``u = v + g dt / 2``: every engine here integrates gravity by
-    semi-implicit Euler and reports the step's velocity ``v`` (the one the last step moved
-    with); ``u`` is the velocity at the step's end, and with it this energy is exactly constant
-    in free flight, so its drift measures the contacts only (with ``v`` itself a ball in free
-    flight would lose ``m g^2 dt^2 / 2`` every step).
+    ``1/2 m |u|^2 - m g . p`` with ``u`` the velocity at the step's end. The peers integrate
+    gravity by semi-implicit Euler and report the step's velocity ``v`` (the one the last step
+    moved with, ``step_velocity``), whose step ends with ``u = v + g dt / 2``; warpsim reports
+    ``u`` itself. With ``u`` this energy is exactly constant in free flight, so its drift
+    measures the contacts only (with ``v`` itself a ball in free flight would lose
+    ``m g^2 dt^2 / 2`` every step).
     """
     g = np.asarray(work.gravity)
-    u = np.asarray(velocity, dtype=np.float64) + 0.5 * work.dt * g
+    u = np.asarray(velocity, dtype=np.float64) + (0.5 * work.dt if step_velocity else 0.0) * g
     return (0.5 * work.mass * np.einsum("ij,ij->i", u, u)
             - work.mass * (np.asarray(position, dtype=np.float64) @ g))
 
 
-def energy_drift(work: Workload, position: np.ndarray, velocity: np.ndarray) -> dict:
+def energy_drift(work: Workload, position: np.ndarray, velocity: np.ndarray,
+                 step_velocity: bool = True) -> dict:
     """Relative change of the total energy from the start, and the worst single sphere's, on
-    the scale of :mod:`warpsim.energy` (each sphere's energy above the scene's lowest point).
+    the scale of :mod:`warpsim.energy` (each sphere's energy above the scene's lowest point);
+    ``step_velocity`` as in :func:`energy`, for the start as for the end: each engine is given
+    the workload's velocity in its own convention.
 
     Spheres whose state is not finite are left out of both (they count as escaped).
     """
-    e0 = energy(work, work.position, work.velocity)
-    e1 = energy(work, position, velocity)
+    e0 = energy(work, work.position, work.velocity, step_velocity)
+    e1 = energy(work, position, velocity, step_velocity)
     ok = np.isfinite(e1)
     if not ok.any():
         return {"total": None, "worst_sphere": None}

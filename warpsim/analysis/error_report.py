@@ -23,23 +23,20 @@ that do:
 How the simulator's contacts are found: the sampled spheres are run again alone in a new
 :class:`warpsim.Simulator` with the same settings (spheres are independent, so they follow the
 same paths as in the full run), one frame at a time, reading the state velocity after each
-frame. A frame whose velocity differs from free flight (``v_prev + g dt``) by more than
+frame. A frame whose velocity differs from free flight (``u_prev + g dt``) by more than
 ``CONTACT_DV_FRAMES`` frames of gravity (plus ``CONTACT_DV_MIN``) holds a contact; its normal is
 the direction of that change, and its time comes from the frame's path: for the linear model
-the chord ``A -> C`` with the step velocity then ``C -> B`` with the reflected one, for the
+the chord ``A -> C`` with the mean velocity ``u_prev + g dt / 2`` then ``C -> B`` with the
+reflected one (``u - g dt / 2``), for the
 ballistic model the two parabola arcs; both give the contact time in closed form (several
 contacts in one frame count as one). From a :class:`warpsim.Trajectory` (positions only) the
 velocities are estimated from consecutive frames, so every frame must be recorded; a contact
 in the next frame spoils that estimate, so contact figures from a trajectory are rougher.
 
-Velocity conventions: the reference starts each sphere from the run's own velocity at time 0.
-For the ballistic model that is the swarm's velocity. The linear model's state velocity is
-semi-implicit Euler's step velocity (the mean over the frame before); its velocity at a frame's
-end is ``v + g dt / 2``, so its spheres start with ``u0 = v + g dt / 2`` (see
-:func:`initial_velocity`). From that start semi-implicit Euler is exact at every frame in free
-flight, and what the report measures is the error of contacts. Taking the swarm's velocity as
-the true one instead adds ``1/2 |g| dt t`` to the linear model's error (8 mm after 1 s at
-60 Hz): a convention, reported as ``settings["convention_offset_m_per_s"]``.
+Velocity convention: the reference starts each sphere from the swarm's own velocity, the
+velocity at time 0 for both motion models, and a state's velocity is the one at its frame's
+end. Both models are exact at every frame in free flight, so what the report measures is the
+error of contacts.
 """
 
 from __future__ import annotations
@@ -233,10 +230,7 @@ def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, see
                          f"got {type(sim_or_trajectory).__name__}")
     times = np.arange(frames + 1) * dt
     horizon = float(times[-1])
-    start = initial_velocity(sub, dt, g, motion)
-    settings["convention_offset_m_per_s"] = float(np.linalg.norm(start[0] - sub.velocity[0])
-                                                  if len(sub) else 0.0)
-    ref = simulate(scene, _with_velocity(sub, start), horizon, times)
+    ref = simulate(scene, sub, horizon, times)
     figures = measure(position, velocity, times, dt, g, motion, ref, contacts,
                       lowest=lowest_potential(scene.gravity, scene.boxes, swarm.position))
     return ErrorReport(settings=settings, sample=idx, horizon=horizon,
@@ -294,7 +288,7 @@ def measure(position: np.ndarray, velocity: np.ndarray | None, times: np.ndarray
     contact_figs = match_contacts(found, ref, np.flatnonzero(keep), contacts,
                                   _dv_threshold(dt, gravity), dt)
     g = np.asarray(gravity, dtype=np.float64)
-    end = velocity[-1] + (0.0 if motion == "ballistic" else 0.5 * dt) * g
+    end = velocity[-1]
     e_run = 0.5 * np.einsum("ki,ki->k", end, end) - position[-1] @ g
     e_ref = (0.5 * np.einsum("ki,ki->k", ref.velocity[-1], ref.velocity[-1])
              - ref.position[-1] @ g)
@@ -305,22 +299,6 @@ def measure(position: np.ndarray, velocity: np.ndarray | None, times: np.ndarray
     energy = {"time_s": float(times[-1]), **_stats(rel, "relative")}
     return {"contacts": contact_figs, "position_error": pos_err, "divergence": divergence,
             "energy": energy}
-
-
-def initial_velocity(swarm: Swarm, dt: float, gravity, motion: str) -> np.ndarray:
-    """The true velocity [m/s] at time 0 of a run started from ``swarm``, (N, 3): the linear
-    model's ``v + g dt / 2`` (its state velocity is a step velocity), the ballistic model's
-    ``v``."""
-    v = np.asarray(swarm.velocity, dtype=np.float64)
-    if motion == "ballistic":
-        return v.copy()
-    return v + 0.5 * dt * np.asarray(gravity, dtype=np.float64)
-
-
-def _with_velocity(swarm: Swarm, velocity: np.ndarray) -> Swarm:
-    return Swarm(position=swarm.position, velocity=velocity, radius=swarm.radius,
-                 mass=swarm.mass, angular_momentum=swarm.angular_momentum,
-                 orientation=swarm.orientation)
 
 
 # -- the simulator side ------------------------------------------------------------------------
@@ -341,12 +319,12 @@ def record_every_frame(sim, frames: int) -> tuple[np.ndarray, np.ndarray]:
 
 def velocities_from_positions(position: np.ndarray, dt: float, gravity, motion: str):
     """State velocities estimated from consecutive frames (exact when the next frame has no
-    contact): linear ``v_j = (x_{j+1} - x_j) / dt - g dt``, ballistic ``u_j = (x_{j+1} - x_j)
-    / dt - g dt / 2``; the last frame repeats the one before plus a kick."""
+    contact): ``u_j = (x_{j+1} - x_j) / dt - g dt / 2`` for both motion models (each frame's
+    free flight is the parabola's chord); the last frame repeats the one before plus a kick.
+    ``motion`` is accepted for symmetry with :func:`contacts_from_frames`."""
     g = np.asarray(gravity, dtype=np.float64)
-    c = 0.5 if motion == "ballistic" else 1.0
     vel = np.empty_like(position)
-    vel[:-1] = np.diff(position, axis=0) / dt - c * g * dt
+    vel[:-1] = np.diff(position, axis=0) / dt - 0.5 * g * dt
     vel[-1] = vel[-2] + g * dt if len(position) > 1 else 0.0
     return vel
 
@@ -368,7 +346,7 @@ def contacts_from_frames(position, velocity, dt: float, gravity, motion: str,
     thr = _dv_threshold(dt, g) if threshold is None else threshold
     a, b = position[:-1], position[1:]
     v0, v1 = velocity[:-1], velocity[1:]
-    pre = v0 + g * dt  # linear: the step velocity of the frame; ballistic: the free end velocity
+    pre = v0 + g * dt  # the velocity at the frame's end in free flight
     dv = v1 - pre
     hit = np.linalg.norm(dv, axis=2) > thr  # (T-1, K)
     empty, none = np.zeros(0), np.zeros(0, np.int64)
@@ -376,17 +354,16 @@ def contacts_from_frames(position, velocity, dt: float, gravity, motion: str,
     points, normals = [np.zeros((0, 3))], [np.zeros((0, 3))]
     for k in range(position.shape[1]):
         frames = np.flatnonzero(hit[:, k])
-        d = -dv[frames, k]  # pre - post (linear) / u0 + g dt - u1 (ballistic)
+        d = -dv[frames, k]  # u0 + g dt - u1: the change of the mean (linear) / end velocity
         size2 = np.einsum("ij,ij->i", d, d)
-        if motion == "ballistic":
-            rhs = b[frames, k] - a[frames, k] - v1[frames, k] * dt + 0.5 * g * dt * dt
-        else:
-            rhs = b[frames, k] - a[frames, k] - v1[frames, k] * dt
+        # linear: B - A = w0 tau + w1 (dt - tau), w0 = u0 + g dt/2, w1 = u1 - g dt/2;
+        # ballistic: the two arcs; both give d tau = B - A - u1 dt + g dt^2 / 2
+        rhs = b[frames, k] - a[frames, k] - v1[frames, k] * dt + 0.5 * g * dt * dt
         tau = np.clip(np.einsum("ij,ij->i", d, rhs) / size2, 0.0, dt)
         if motion == "ballistic":
             point = a[frames, k] + v0[frames, k] * tau[:, None] + 0.5 * g * tau[:, None] ** 2
         else:
-            point = a[frames, k] + pre[frames, k] * tau[:, None]
+            point = a[frames, k] + (v0[frames, k] + 0.5 * g * dt) * tau[:, None]
         times.append(frames * dt + tau)
         points.append(point)
         normals.append(-d / np.sqrt(size2)[:, None])
