@@ -205,8 +205,9 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
     def candidate(q: Path, boxes: Boxes, k: int, best: int, best_t: scalar, best_n: vec3):
         """Box ``k`` against the best so far: the reject, the exact sweep, and the closer of the
         two contacts kept (ties: the lower box index)."""
-        if apart(q, boxes.center[k], boxes.extent[k]) == 0:
-            hit, t, normal = exact(q, boxes.center[k], boxes.rotation[k], boxes.half_extents[k],
+        center = boxes.center[k]
+        if apart(q, center, boxes.extent[k]) == 0:
+            hit, t, normal = exact(q, center, boxes.rotation[k], boxes.half_extents[k],
                                    boxes.radius[k])
             if hit == 1 and (best < 0 or t < best_t or (t == best_t and k < best)):
                 best = k
