@@ -80,18 +80,25 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         [m]: its bounds grow by ``r`` on every axis, ``t`` runs over ``[0, 1]``."""
         return make_path(a, d, vec3(ZERO, ZERO, ZERO), ONE, r, d, vec3(r, r, r))
 
-    @wp.func(inline=True)
-    def sweep_chord(q: Path, center: vec3, rotation: mat33, half_extents: vec3,
-                    box_radius: scalar):
-        """The exact sweep of the chord against one box, in the box's frame.
+    @wp.func
+    def sweep_box(a: vec3, d: vec3, r: scalar, center: vec3, rotation: mat33,
+                  half_extents: vec3, box_radius: scalar):
+        """The exact sweep of a sphere (centre ``a`` moving by ``d``, radius ``r``) against one
+        box, in the box's frame; out of line and without structs, so a call copies no ``Path``.
 
         Returns:
             ``(hit, t, normal)`` with the normal in world coordinates (see ``sweep_rounded_box``).
         """
         to_local = wp.transpose(rotation)
-        hit, t, n_local = sweep_rounded_box(to_local * (q.a - center), to_local * q.v,
-                                            half_extents, box_radius + q.r)
+        hit, t, n_local = sweep_rounded_box(to_local * (a - center), to_local * d,
+                                            half_extents, box_radius + r)
         return hit, t, rotation * n_local
+
+    @wp.func(inline=True)
+    def sweep_chord(q: Path, center: vec3, rotation: mat33, half_extents: vec3,
+                    box_radius: scalar):
+        """The exact sweep of the chord against one box (:func:`sweep_box`)."""
+        return sweep_box(q.a, q.v, q.r, center, rotation, half_extents, box_radius)
 
     return SimpleNamespace(chord_path=chord_path, sweep_chord=sweep_chord,
                            contact_centre=contact_centre, separate=separate)
