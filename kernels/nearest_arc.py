@@ -62,19 +62,27 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
         d = tau * (v + (HALF * tau) * g)
         return make_path(a, v, g, tau, r, d, sagitta(g, tau) + vec3(r, r, r))
 
-    @wp.func(inline=True)
-    def sweep_arc(q: Path, center: vec3, rotation: mat33, half_extents: vec3,
-                  box_radius: scalar):
-        """The exact sweep of the arc against one box, in the box's frame.
+    @wp.func
+    def sweep_box_arc(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, center: vec3,
+                      rotation: mat33, half_extents: vec3, box_radius: scalar):
+        """The exact sweep of the arc ``a + v s + 1/2 g s^2``, ``s`` in ``[0, tau]``, of a
+        sphere of radius ``r`` against one box, in the box's frame; out of line and without
+        structs, so a call copies no ``Path``.
 
         Returns:
             ``(hit, s, normal)`` with the normal in world coordinates (``sweep_rounded_box_arc``).
         """
         to_local = wp.transpose(rotation)
-        hit, s, n_local = sweep_rounded_box_arc(to_local * (q.a - center), to_local * q.v,
-                                                to_local * q.g, q.tau, half_extents,
-                                                box_radius + q.r)
+        hit, s, n_local = sweep_rounded_box_arc(to_local * (a - center), to_local * v,
+                                                to_local * g, tau, half_extents, box_radius + r)
         return hit, s, rotation * n_local
+
+    @wp.func(inline=True)
+    def sweep_arc(q: Path, center: vec3, rotation: mat33, half_extents: vec3,
+                  box_radius: scalar):
+        """The exact sweep of the arc against one box (:func:`sweep_box_arc`)."""
+        return sweep_box_arc(q.a, q.v, q.g, q.tau, q.r, center, rotation, half_extents,
+                             box_radius)
 
     arc_candidate = candidate_funcs(p, sweep_arc, "brute").candidate
 
