@@ -25,6 +25,7 @@ import numpy as np
 import warpsim as ws
 from warpsim.energy import relative_change
 from warpsim.kernels.collide_kernels import collide_kernel
+from warpsim.kernels.data import Features
 
 from .common import ROOM, finish, median_times, parser, print_table, room_swarm, start
 from .sweep import DT, SEED, build_seconds, device_sweep, sweep_inputs
@@ -51,7 +52,8 @@ def sweep_accuracy(cfg: dict, device) -> dict:
     away; their throughput side by side."""
     n, k = cfg["acc_sweep_n"], cfg["acc_sweep_k"]
     boxes, pos, vel, rad = sweep_inputs(n, k, seed=SEED + 1)
-    build = {p: build_seconds(collide_kernel(p, "brute"), device) for p in ("float32", "float64")}
+    build = {p: build_seconds(collide_kernel(Features(precision=p)), device)
+             for p in ("float32", "float64")}
     rows = []
     for offset in (0.0, FAR_OFFSET):
         moved = ws.RoundedBoxes(boxes.center + offset, boxes.half_extents, boxes.rotation,

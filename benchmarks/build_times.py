@@ -46,20 +46,20 @@ BACKWARD_ENTRY = "_cpu_kernel_backward"
 def variants(quick: bool) -> list[dict]:
     """The builds to time, each ``{"factory": ..., "args": {...}, "backward": bool}``."""
     frame = [{"factory": "frame", "backward": False,
-              "args": {"precision_name": p, "spin": s, "energy_correction": c, "lossy": lossy,
+              "args": {"precision": p, "spin": s, "energy_correction": c, "lossy": lossy,
                        "broad_phase": bp}}
              for p, s, c, lossy, bp in itertools.product(PRECISIONS, (False, True), (True, False),
                                                           (False, True), BROAD_PHASES)]
     collide = [{"factory": "collide", "backward": False,
-                "args": {"precision_name": p, "broad_phase": bp}}
+                "args": {"precision": p, "broad_phase": bp}}
                for p, bp in itertools.product(PRECISIONS, BROAD_PHASES)]
     bounce = [{"factory": "bounce", "backward": False,
-               "args": {"precision_name": p, "spin": s, "lossy": lossy, "broad_phase": bp}}
+               "args": {"precision": p, "spin": s, "lossy": lossy, "broad_phase": bp}}
               for p, s, lossy, bp in itertools.product(PRECISIONS, (False, True), (False, True),
                                                        BROAD_PHASES)]
     base = dict(frame[0], backward=True)  # float32, no spin, correction, elastic, brute
     ballistic = [{"factory": "frame", "backward": False,
-                  "args": {**frame[0]["args"], "precision_name": p, "broad_phase": bp,
+                  "args": {**frame[0]["args"], "precision": p, "broad_phase": bp,
                            "motion": "ballistic"}}
                  for p, bp in itertools.product(PRECISIONS, BROAD_PHASES)]
     if not quick:
@@ -69,24 +69,24 @@ def variants(quick: bool) -> list[dict]:
         return next(v for v in items if all(v["args"][k] == x for k, x in want.items()))
 
     return [frame[0], base,
-            pick(frame, precision_name="float32", spin=False, lossy=False,
+            pick(frame, precision="float32", spin=False, lossy=False,
                  energy_correction=True, broad_phase="grid"),
-            pick(frame, precision_name="float64", spin=False, lossy=False,
+            pick(frame, precision="float64", spin=False, lossy=False,
                  energy_correction=True, broad_phase="bvh"),
-            pick(frame, precision_name="float32", spin=True, lossy=False,
+            pick(frame, precision="float32", spin=True, lossy=False,
                  energy_correction=True, broad_phase="grid"),
-            pick(frame, precision_name="float32", spin=False, lossy=True,
+            pick(frame, precision="float32", spin=False, lossy=True,
                  energy_correction=False, broad_phase="grid-bvh"),
-            pick(ballistic, precision_name="float32", broad_phase="grid"),
-            pick(collide, precision_name="float32", broad_phase="brute"),
-            pick(collide, precision_name="float64", broad_phase="grid"),
-            pick(bounce, precision_name="float32", spin=False, lossy=False, broad_phase="brute")]
+            pick(ballistic, precision="float32", broad_phase="grid"),
+            pick(collide, precision="float32", broad_phase="brute"),
+            pick(collide, precision="float64", broad_phase="grid"),
+            pick(bounce, precision="float32", spin=False, lossy=False, broad_phase="brute")]
 
 
 def label(v: dict) -> dict:
     """Table columns of a variant."""
     a = v["args"]
-    return {"kernel": v["factory"], "precision": a["precision_name"],
+    return {"kernel": v["factory"], "precision": a["precision"],
             "spin": a.get("spin"), "correction": a.get("energy_correction"),
             "lossy": a.get("lossy"), "broad_phase": a["broad_phase"],
             "motion": a.get("motion", "linear" if v["factory"] != "collide" else None),
@@ -105,11 +105,12 @@ def child(spec: dict, cache: str) -> dict:
     if spec["backward"]:  # as before the fix: Warp's default, adjoint code generated
         variant.KERNEL_OPTIONS["enable_backward"] = True
     from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
+    from warpsim.kernels.data import Features
     from warpsim.kernels.frame_kernel import frame_kernel
 
     factory = {"frame": frame_kernel, "collide": collide_kernel,
                "bounce": bounce_kernel}[spec["factory"]]
-    kernel = factory(**spec["args"])
+    kernel = factory(Features(**spec["args"]))
     start, cpu = time.perf_counter(), time.process_time()
     wp.load_module(kernel.module, device="cpu")
     seconds, cpu_s = time.perf_counter() - start, time.process_time() - cpu

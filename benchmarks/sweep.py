@@ -19,6 +19,7 @@ import warp as wp
 import warpsim as ws
 from warpsim.device import BVH_MIN_BOXES
 from warpsim.kernels.collide_kernels import collide_kernel
+from warpsim.kernels.data import Features
 from warpsim.kernels.precision import precision
 from warpsim.model import Spheres, kernel_arguments, put_model, to_device
 
@@ -95,7 +96,7 @@ def device_sweep(boxes, position, velocity, radius, dt, precision_name, device,
     """
     p = precision(precision_name)
     n = len(position)
-    kernel = collide_kernel(p.name, broad_phase)
+    kernel = collide_kernel(Features(precision=p.name, broad_phase=broad_phase))
     model = put_model(boxes, p, device, broad_phase=broad_phase, dt=dt)
     out = {"box_out": wp.empty(n, dtype=wp.int32, device=device),
            "t_out": wp.empty(n, dtype=p.scalar, device=device)}
@@ -179,7 +180,8 @@ def broad_phase_row(n: int, k: int, cfg: dict, device) -> dict:
 
 def run(cfg: dict, device) -> dict:
     """Both tables; returns their rows and the kernels' build times."""
-    build = {f"collide float32 {bp}": build_seconds(collide_kernel("float32", bp), device)
+    build = {f"collide float32 {bp}": build_seconds(collide_kernel(Features(broad_phase=bp)),
+                                                    device)
              for bp in ("brute", "bvh")}
     rows = [sweep_row(n, k, cfg, device) for k in cfg["sweep_k"] for n in cfg["sweep_n"]]
     print_table("Sweep throughput, float32 (one frame, dt = 1/60 s), brute force", rows, [

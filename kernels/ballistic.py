@@ -28,10 +28,10 @@ from types import SimpleNamespace
 import warp as wp
 
 from .arc import arc_funcs
-from .bounce import bounce_funcs
-from .dynamics import dynamics_funcs
-from .nearest_arc import model_nearest_hit_arc, nearest_arc_funcs, uses_bvh
-from .precision import Precision
+from .contact import contact_funcs
+from .data import Features, model_structs
+from .nearest_arc import model_nearest_hit_arc, nearest_arc_funcs
+from .precision import precision
 
 #: A contact with a normal speed at most this [m/s] while gravity presses the sphere onto the
 #: surface is a support: a hop of at most 1.3 micrometres, the exact reference's threshold.
@@ -42,41 +42,25 @@ RESTING_SPEED = 5.0e-3
 COPLANAR_REL = 1.0e-6
 
 
-def ballistic_funcs(p: Precision, spin: bool, lossy: bool, broad_phase,
-                    events: bool = False) -> SimpleNamespace:
-    """Build the ballistic bounce loop for one precision and one feature set.
-
-    Args:
-        p: precision.
-        spin: update the angular momentum from contact friction (else ``L`` passes through).
-        lossy: apply ``energy_retention`` at each bounce (else no loss code is compiled).
-        broad_phase: one of ``nearest.BROAD_PHASES`` (``True``/``False`` mean ``"bvh"`` and
-            ``"brute"``); see ``nearest_arc.model_nearest_hit_arc``.
-        events: write one row per contact into the event buffer, as ``bounce.bounce_funcs``
-            does (the fraction is then of the frame's time, exact here).
+@cache
+def ballistic_funcs(features: Features) -> SimpleNamespace:
+    """Build the ballistic bounce loop for one feature set (``precision``, ``spin``, ``lossy``,
+    ``broad_phase`` and ``events`` are read; see ``nearest_arc.model_nearest_hit_arc``). Events
+    are written as ``bounce.bounce_funcs`` writes them, the fraction being of the frame's time,
+    exact here.
 
     Returns:
         Namespace with ``ballistic_path``.
     """
-    uses_bvh(broad_phase)  # checks the name
-    name = {True: "bvh", False: "brute"}.get(broad_phase, broad_phase)
-    return _ballistic_funcs(p, bool(spin), bool(lossy), name, bool(events))
-
-
-@cache
-def _ballistic_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
-                     events: bool) -> SimpleNamespace:
+    p = precision(features.precision)
     scalar, vec3 = p.scalar, p.vec3
-    nearest_hit_arc = model_nearest_hit_arc(p, broad_phase)
+    Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
+    nearest_hit_arc = model_nearest_hit_arc(p, features.broad_phase)
     arc_contact_centre = nearest_arc_funcs(p).arc_contact_centre
     arc_point = arc_funcs(p).arc_point
-    write_event = bounce_funcs(p, spin, lossy, "brute", events).write_event
-    dyn = dynamics_funcs(p)
-    friction_spin = dyn.friction_spin
-    potential = dyn.potential
+    on_contact = contact_funcs(p, features.spin, features.lossy, features.events)
     ZERO = scalar(0.0)
     HALF = scalar(0.5)
-    ONE = scalar(1.0)
     TWO = scalar(2.0)
     RESTING = scalar(RESTING_SPEED)
     COPLANAR = scalar(1.0 - COPLANAR_REL)
@@ -90,30 +74,17 @@ def _ballistic_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
 
     @wp.func
     def ballistic_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
-                       g: vec3, origin: vec3, dt: scalar, friction: scalar, max_rot: scalar,
-                       retention: scalar, max_bounces: int,
-                       box_center: wp.array(dtype=p.vec3), box_rotation: wp.array(dtype=p.mat33),
-                       box_half_extents: wp.array(dtype=p.vec3),
-                       box_radius: wp.array(dtype=p.scalar), box_extent: wp.array(dtype=p.vec3),
-                       box_bvh: wp.uint64, grid_lower: vec3, grid_cell: vec3,
-                       grid_inv_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
-                       grid_cell_start: wp.array(dtype=wp.int32),
-                       grid_cell_boxes: wp.array(dtype=wp.int32), frame: int, sphere: int,
-                       event_count_out: wp.array(dtype=wp.int32),
-                       event_index_out: wp.array2d(dtype=wp.int32),
-                       event_vector_out: wp.array2d(dtype=vec3),
-                       event_scalar_out: wp.array2d(dtype=scalar)):
+                       physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
+                       sphere: int, events: EventBuffer):
         """Move a sphere for one frame along its parabolas, bouncing up to ``max_bounces`` times.
 
         Args:
             a: centre at the frame's start [m]. v: true velocity at the frame's start [m/s].
             r: radius [m]. m: mass [kg]. L: angular momentum [kg m^2/s]. energy: total energy
-            [J]. g: gravity [m/s^2]. origin: potential reference point [m]. dt: frame duration
-            [s]. friction: ``k_f`` [kg/s]. max_rot: ``|Rot|`` clamp [rad/s]. retention: kept
-            fraction of kinetic energy per bounce. max_bounces: cap on contacts this frame (a
-            launch value). box_*: the obstacles (see ``nearest``);
-            ``box_bvh`` and ``grid_*``: the broad phase's data. frame, sphere,
-            event_*: the event buffer and what a row names (see ``bounce.bounce_funcs``).
+            [J]. physics: the scene's constants (gravity, the potential's origin, ``dt``,
+            friction, the ``|Rot|`` clamp, the retention and the cap on contacts this frame).
+            boxes, broad: the obstacles and the broad phase's data. frame, sphere, events: the
+            event buffer and what a row names (see ``bounce.bounce_funcs``).
 
         Returns:
             ``(position, velocity, L, energy, bounces, capped, supported)``: the true velocity
@@ -122,6 +93,9 @@ def _ballistic_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
             ``capped`` is 1 when the cap stopped the sphere at its last contact, ``supported``
             is 1 when one of them was a support.
         """
+        g = physics.gravity
+        dt = physics.dt
+        max_bounces = physics.max_bounces
         rest = dt  # time left in the frame [s]
         g_eff = g  # gravity the sphere feels: its tangential part while supported
         supports = int(0)
@@ -132,10 +106,7 @@ def _ballistic_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
         supported = int(0)
         done = int(0)
         while done == 0:
-            box, s, n = nearest_hit_arc(a, v, g_eff, rest, r, box_center, box_rotation,
-                                        box_half_extents, box_radius, box_extent, box_bvh,
-                                        grid_lower, grid_cell, grid_inv_cell, grid_dims,
-                                        grid_margin, grid_cell_start, grid_cell_boxes)
+            box, s, n = nearest_hit_arc(a, v, g_eff, rest, r, boxes, broad)
             if box < 0:
                 a = arc_point(a, v, g_eff, rest)
                 v = v + rest * g_eff
@@ -145,26 +116,21 @@ def _ballistic_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
                 done = 1
             else:
                 bounces += 1
-                contact = arc_contact_centre(a, v, g_eff, s, n, box_radius[box] + r,
-                                             box_extent[box])
+                contact = arc_contact_centre(a, v, g_eff, s, n, boxes.radius[box] + r,
+                                             boxes.extent[box])
                 u = v + s * g_eff
                 rest = wp.max(rest - s, ZERO)
-                if wp.static(spin):
-                    L = friction_spin(L, u, n, r, m, dt, friction, max_rot)
+                L = on_contact.spin(L, u, n, r, m, physics)
                 un = wp.dot(u, n)
                 gn = wp.dot(g, n)
-                keep = ONE
-                if wp.static(lossy):
-                    keep = wp.sqrt(retention)
+                keep = on_contact.keep(physics)
                 # a support: gravity presses, and the normal speed is below RESTING_SPEED or the
                 # hop would last less than dt / max_bounces (2 keep |un| / |gn|)
                 resting = gn < -TANGENT_REL * wp.length(g) and (
                     -un <= wp.max(RESTING, -gn * dt * HALF_HOP / (scalar(wp.max(max_bounces, 1))
                                                                 * keep)))
-                if wp.static(events):
-                    write_event(frame, sphere, box, int(resting), contact, n, (dt - rest) / dt,
-                                -un, event_count_out, event_index_out, event_vector_out,
-                                event_scalar_out)
+                on_contact.event(frame, sphere, box, int(resting), contact, n,
+                                 (dt - rest) / dt, -un, events)
                 if resting:
                     supported = 1
                     u_sq = wp.dot(u, u)
@@ -193,9 +159,8 @@ def _ballistic_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
                     v = u
                 else:
                     v = u - TWO * un * n
-                    if wp.static(lossy):
-                        ep = potential(m, g, contact, origin)
-                        energy = ep + retention * (energy - ep)
+                    if wp.static(features.lossy):
+                        energy = on_contact.loss(energy, m, contact, physics)
                         v = v * keep
                     if supports > 0:
                         speed = wp.length(v)

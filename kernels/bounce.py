@@ -27,9 +27,11 @@ from types import SimpleNamespace
 
 import warp as wp
 
+from .contact import contact_funcs
+from .data import Features, model_structs
 from .dynamics import RESET_ULPS, dynamics_funcs
 from .nearest import model_nearest_hit, nearest_funcs
-from .precision import Precision
+from .precision import precision
 
 #: With contact losses, approach speeds up to this many frames of gravity make a resting
 #: (sliding) contact: below that a lossy ball would only decay through sub-frame hops.
@@ -46,37 +48,26 @@ RESTING_FRAMES_ELASTIC = 1.001
 RESTING_GAP_ULPS = 16.0
 
 
-
 @cache
-def bounce_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
-                 events: bool = False) -> SimpleNamespace:
-    """Build the bounce loop for one precision and one feature set.
-
-    Args:
-        p: precision.
-        spin: update the angular momentum from contact friction (else ``L`` passes through
-            untouched and no spin code is compiled).
-        lossy: apply ``energy_retention`` at each bounce (else no loss code is compiled).
-        broad_phase: one of ``nearest.BROAD_PHASES`` (bit-identical results).
-        events: write one row per contact into the event buffer (else no event code).
+def bounce_funcs(features: Features) -> SimpleNamespace:
+    """Build the bounce loop for one feature set (``precision``, ``spin``, ``lossy``,
+    ``broad_phase`` and ``events`` are read).
 
     Returns:
         Namespace with ``bounce_path``.
 
-    Event buffer (see :func:`write_event`): ``event_count_out[0]`` counts every contact of the
-    launch (the rows past the buffer's capacity are dropped, never written), row ``j`` of
-    ``event_index_out`` (C, 4) is ``(frame, sphere, box, resting)``, of ``event_vector_out`` (C,
-    2) ``(contact centre [m], normal)``, of ``event_scalar_out`` (C, 2) ``(fraction of the
-    frame's path, normal speed before the contact [m/s])``; the normal speed is that of the
+    The event rows (``contact.contact_funcs``' ``write_event``) give the normal speed of the
     velocity at the contact's time ``tau`` on the chord's parabola, ``-(w + g (tau - dt / 2)).n``
     (``u + g tau`` in free flight), at least 0.
     """
+    p = precision(features.precision)
     scalar, vec3 = p.scalar, p.vec3
-    nearest_hit = model_nearest_hit(p, broad_phase)
+    Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
+    lossy = features.lossy
+    nearest_hit = model_nearest_hit(p, features.broad_phase)
     contact_centre = nearest_funcs(p).contact_centre
-    dyn = dynamics_funcs(p)
-    friction_spin = dyn.friction_spin
-    potential = dyn.potential
+    on_contact = contact_funcs(p, features.spin, lossy, features.events)
+    potential = dynamics_funcs(p).potential
     ZERO = scalar(0.0)
     ONE = scalar(1.0)
     TWO = scalar(2.0)
@@ -114,55 +105,23 @@ def bounce_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
         return out
 
     @wp.func
-    def write_event(frame: int, sphere: int, box: int, resting: int, contact: vec3, n: vec3,
-                    fraction: scalar, speed: scalar, event_count_out: wp.array(dtype=wp.int32),
-                    event_index_out: wp.array2d(dtype=wp.int32),
-                    event_vector_out: wp.array2d(dtype=vec3),
-                    event_scalar_out: wp.array2d(dtype=scalar)):
-        """Append one contact to the launch's event buffer (counted even when it is full)."""
-        row = wp.atomic_add(event_count_out, 0, 1)
-        if row < event_index_out.shape[0]:
-            event_index_out[row, 0] = frame
-            event_index_out[row, 1] = sphere
-            event_index_out[row, 2] = box
-            event_index_out[row, 3] = resting
-            event_vector_out[row, 0] = contact
-            event_vector_out[row, 1] = n
-            event_scalar_out[row, 0] = fraction
-            event_scalar_out[row, 1] = speed
-
-    @wp.func
     def bounce_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
-                    g: vec3, origin: vec3, dt: scalar, friction: scalar, max_rot: scalar,
-                    retention: scalar, max_bounces: int,
-                    box_center: wp.array(dtype=p.vec3), box_rotation: wp.array(dtype=p.mat33),
-                    box_half_extents: wp.array(dtype=p.vec3),
-                    box_radius: wp.array(dtype=p.scalar), box_extent: wp.array(dtype=p.vec3),
-                    box_bvh: wp.uint64,
-                    grid_lower: vec3, grid_cell: vec3, grid_inv_cell: vec3,
-                    grid_dims: wp.vec3i, grid_margin: scalar,
-                    grid_cell_start: wp.array(dtype=wp.int32),
-                    grid_cell_boxes: wp.array(dtype=wp.int32), frame: int, sphere: int,
-                    event_count_out: wp.array(dtype=wp.int32),
-                    event_index_out: wp.array2d(dtype=wp.int32),
-                    event_vector_out: wp.array2d(dtype=vec3),
-                    event_scalar_out: wp.array2d(dtype=scalar)):
+                    physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
+                    events: EventBuffer):
         """Move a sphere for one frame among the boxes, bouncing up to ``max_bounces`` times.
 
         Args:
             a: centre at the start [m]. v: velocity at the frame's start [m/s] (the frame sweeps
             its chord, mean velocity ``v + g dt / 2``). r: radius [m].
             m: mass [kg]. L: angular momentum [kg m^2/s]. energy: total energy [J] (see
-            ``dynamics``). g: gravity [m/s^2] (the chord's half kicks, resting contacts, the
-            rise cut and the loss's potential). origin: potential reference point [m].
-            dt: frame duration [s].
-            friction: ``k_f`` [kg/s]. max_rot: ``|Rot|`` clamp [rad/s]. retention: kept
-            fraction of kinetic energy per bounce. max_bounces: cap on contacts this frame (a
-            launch value, not compiled in: the loop costs the same, and each cap would be a
-            build of its own). box_*: the obstacles (see ``nearest``);
-            ``box_bvh`` and ``grid_*``: the broad phase's data (see ``nearest``). frame,
-            sphere: what an event row names (frame within the launch, sphere index).
-            event_*: the event buffer (written only when built with ``events``).
+            ``dynamics``). physics: the scene's constants (``data.model_structs``): gravity
+            (the chord's half kicks, resting contacts, the rise cut and the loss's potential),
+            the potential's origin, ``dt``, friction, the ``|Rot|`` clamp, the retention and the
+            cap on contacts this frame (a launch value, not compiled in: the loop costs the
+            same, and each cap would be a build of its own). boxes, broad: the obstacles and
+            the broad phase's data. frame, sphere: what an event row names (frame within the
+            launch, sphere index). events: the event buffer (written only when built with
+            ``events``).
 
         Returns:
             ``(position, velocity, L, energy, bounces, capped, supported)``: ``velocity`` is the
@@ -170,6 +129,8 @@ def bounce_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
             the contacts taken, ``capped`` is 1 when the cap stopped the sphere at its last
             contact, ``supported`` is 1 when one of them was a resting contact.
         """
+        g = physics.gravity
+        dt = physics.dt
         # the chord of the frame's free-flight parabola: its velocity is the frame's mean,
         # u + g dt / 2 (the velocity at the frame's start plus half a kick)
         half_kick = g * (HALF * dt)
@@ -182,21 +143,17 @@ def bounce_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
         done = int(0)
         travelled = ZERO  # fraction of the frame's path behind the sphere
         while done == 0:
-            box, t, n = nearest_hit(a, d, r, box_center, box_rotation, box_half_extents,
-                                    box_radius, box_extent, box_bvh, grid_lower, grid_cell,
-                                    grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
-                                    grid_cell_boxes)
+            box, t, n = nearest_hit(a, d, r, boxes, broad)
             if box < 0:
                 a = a + d
                 done = 1
-            elif bounces >= max_bounces:
+            elif bounces >= physics.max_bounces:
                 capped = 1  # path left and no contact left: stay at the last contact
                 done = 1
             else:
                 bounces += 1
-                contact = contact_centre(a, t, d, n, box_radius[box] + r, box_extent[box])
-                if wp.static(spin):
-                    L = friction_spin(L, w, n, r, m, dt, friction, max_rot)
+                contact = contact_centre(a, t, d, n, boxes.radius[box] + r, boxes.extent[box])
+                L = on_contact.spin(L, w, n, r, m, physics)
                 vn = wp.dot(w, n)
                 dn = wp.dot(d, n)
                 resting = -vn <= REST * wp.max(-wp.dot(g, n), ZERO) * dt
@@ -205,13 +162,12 @@ def bounce_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
                     gap = t * -dn
                     scale = wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))
                     resting = resting and gap <= GAP_ULPS * (scale + wp.length(d))
-                if wp.static(events):
+                if wp.static(features.events):
                     # the velocity at the contact's time on the chord's parabola (mean velocity
                     # w, acceleration g), u + g tau: 0 for a sphere at rest on its support
                     speed = -wp.dot(w + g * ((travelled - HALF) * dt), n)
-                    write_event(frame, sphere, box, int(resting), contact, n, travelled,
-                                wp.max(speed, ZERO), event_count_out, event_index_out,
-                                event_vector_out, event_scalar_out)
+                    on_contact.event(frame, sphere, box, int(resting), contact, n, travelled,
+                                     wp.max(speed, ZERO), events)
                 if resting:
                     supported = 1
                     support = n
@@ -221,12 +177,11 @@ def bounce_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
                     w = w - TWO * vn * n
                     d = (ONE - t) * (d - TWO * dn * n)
                     if wp.static(lossy):
-                        ep = potential(m, g, contact, origin)
-                        energy = ep + retention * (energy - ep)
-                        keep = wp.sqrt(retention)
+                        energy = on_contact.loss(energy, m, contact, physics)
+                        keep = on_contact.keep(physics)
                         w = w * keep
                         d = d * keep
-                d = clip_rise(contact, d, w, m, g, origin, energy)
+                d = clip_rise(contact, d, w, m, g, physics.origin, energy)
                 a = contact
         # the velocity at the frame's end: the second half kick; a support takes its part into
         # the surface (the sphere ends on it, its normal velocity 0, as at the frame's start)
@@ -237,4 +192,4 @@ def bounce_funcs(p: Precision, spin: bool, lossy: bool, broad_phase: str,
                 v = v - into * support
         return a, v, L, energy, bounces, capped, supported
 
-    return SimpleNamespace(bounce_path=bounce_path, write_event=write_event)
+    return SimpleNamespace(bounce_path=bounce_path)

@@ -22,14 +22,14 @@ import warp as wp
 
 from .ballistic import ballistic_funcs
 from .bounce import bounce_funcs
+from .data import Features, model_structs
 from .dynamics import RESET_ULPS, dynamics_funcs
 from .precision import precision
 from .variant import variant_kernel
 
 
 @cache
-def frame_kernel(precision_name: str, spin: bool, energy_correction: bool, lossy: bool,
-                 broad_phase: str, events: bool = False, motion: str = "linear"):
+def frame_kernel(features: Features):
     """Build the frame kernel for one feature set.
 
     One thread per sphere advances it by ``frame_count`` frames with its state in registers,
@@ -39,40 +39,38 @@ def frame_kernel(precision_name: str, spin: bool, energy_correction: bool, lossy
     whatever the frames per launch.
 
     Args:
-        precision_name: ``"float32"`` or ``"float64"``.
-        spin: friction torque on ``L`` at contacts and orientation integration; without it the
-            angular momentum and orientation arrays are neither read nor written.
-        energy_correction: reset ``|v|`` from the energy after the move; without it the speed
-            is only ever lowered to the energy bound, so energy is never gained either way.
-        lossy: ``energy_retention < 1``.
-        broad_phase: how each sphere finds its candidate boxes, one of
-            ``nearest.BROAD_PHASES``; the results are bit-identical whichever it is.
-        events: write every contact into the launch's event buffer (``bounce.bounce_funcs``);
-            without it no event code is compiled and the buffer is not touched.
-        motion: ``"linear"``, the sheet's chord per frame (``bounce.bounce_path``), or
-            ``"ballistic"``, the exact parabola (``ballistic.ballistic_path``); the state's
-            velocity is the true one at the frame's end for both. A linear kernel contains no
-            ballistic code and vice versa.
+        features: what the kernel is built for (``data.Features``); every field is read:
+            ``spin``: friction torque on ``L`` at contacts and orientation integration; without
+            it the angular momentum and orientation arrays are neither read nor written.
+            ``energy_correction``: reset ``|v|`` from the energy after the move; without it the
+            speed is only ever lowered to the energy bound, so energy is never gained either
+            way. ``lossy``: ``energy_retention < 1``. ``broad_phase``: how each sphere finds its
+            candidate boxes (bit-identical results whichever). ``events``: write every contact
+            into the launch's event buffer; without it no event code is compiled and the buffer
+            is not touched. ``motion``: ``"linear"``, the sheet's chord per frame
+            (``bounce.bounce_path``), or ``"ballistic"``, the exact parabola
+            (``ballistic.ballistic_path``); the state's velocity is the true one at the frame's
+            end for both. A linear kernel contains no ballistic code and vice versa.
 
-    Kernel parameters beyond the model, the sphere constants and the state:
+    Kernel parameters beyond the model structs, the sphere constants and the state:
         frame_count: frames this launch advances (>= 0).
         record_every: record one frame in this many and the launch's last one (0: none).
+        sphere_offset: index of the launch's first sphere in the swarm (event rows name it).
         record_position_out, record_orientation_out: (records, N) centres [m] and orientations.
         record_velocity_out, record_angular_velocity_out: (records, N) velocity at the
             recorded frame [m/s] (the state's) and world angular velocity ``Rot`` [rad/s];
             written only when the arrays have rows (a (0, N) array skips them).
-        sphere_offset: index of the launch's first sphere in the swarm (event rows name it).
-        event_count_out, event_index_out, event_vector_out, event_scalar_out: the event buffer;
-            an event's frame is the frame within the launch, from 1.
+        events_out: the event buffer; an event's frame is the frame within the launch, from 1.
     """
-    p = precision(precision_name)
-    scalar, vec3, mat33, quat = p.scalar, p.vec3, p.mat33, p.quat
-    if motion not in ("linear", "ballistic"):
-        raise ValueError(f"motion must be 'linear' or 'ballistic', got {motion!r}")
+    p = precision(features.precision)
+    scalar, vec3, quat = p.scalar, p.vec3, p.quat
+    Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
+    spin, energy_correction = features.spin, features.energy_correction
+    motion = features.motion
     if motion == "ballistic":
-        path = ballistic_funcs(p, spin, lossy, broad_phase, events).ballistic_path
+        path = ballistic_funcs(features).ballistic_path
     else:
-        path = bounce_funcs(p, spin, lossy, broad_phase, events).bounce_path
+        path = bounce_funcs(features).bounce_path
     dyn = dynamics_funcs(p)
     energy_along_gravity = dyn.energy_along_gravity
     kinetic_energy = dyn.kinetic_energy
@@ -85,31 +83,18 @@ def frame_kernel(precision_name: str, spin: bool, energy_correction: bool, lossy
 
     @wp.func
     def linear_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
-                     gravity: vec3, origin: vec3, dt: scalar, friction: scalar, max_rot: scalar,
-                     retention: scalar, max_bounces: int,
-                     box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
-                     box_half_extents: wp.array(dtype=vec3), box_radius: wp.array(dtype=scalar),
-                     box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64,
-                     grid_lower: vec3, grid_cell: vec3, grid_inv_cell: vec3,
-                    grid_dims: wp.vec3i, grid_margin: scalar,
-                     grid_cell_start: wp.array(dtype=wp.int32),
-                     grid_cell_boxes: wp.array(dtype=wp.int32), frame: int, sphere: int,
-                     event_count_out: wp.array(dtype=wp.int32),
-                     event_index_out: wp.array2d(dtype=wp.int32),
-                     event_vector_out: wp.array2d(dtype=vec3),
-                     event_scalar_out: wp.array2d(dtype=scalar)):
+                     physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
+                     events: EventBuffer):
         """One frame of the linear (chord) model; returns the state and the frame's counts.
 
         ``v`` is the velocity at the frame's start, and the one at its end comes back; the
         energy is that of it, which the chord keeps exactly in free flight, so the reset
         changes nothing there and only removes drift.
         """
-        x, v, L, energy, bounces, capped, supported = path(
-            x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention, max_bounces,
-            box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
-            grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
-            grid_cell_boxes, frame, sphere, event_count_out, event_index_out, event_vector_out,
-            event_scalar_out)
+        gravity = physics.gravity
+        origin = physics.origin
+        x, v, L, energy, bounces, capped, supported = path(x, v, r, m, L, energy, physics, boxes,
+                                                          broad, frame, sphere, events)
         if supported == 1:
             # a resting contact is inelastic: keep the state and take its energy when that is
             # lower by more than rounding; never more: a state above E (rounding on a long
@@ -131,44 +116,31 @@ def frame_kernel(precision_name: str, spin: bool, energy_correction: bool, lossy
         else:
             v = energy_along_gravity(v, energy, m, gravity, x, origin, 0)
         if wp.static(spin):
-            rot = rotation_vector(L, inertia(m, r), max_rot)
-            o = integrate_orientation(o, rot, dt)
+            rot = rotation_vector(L, inertia(m, r), physics.max_rot)
+            o = integrate_orientation(o, rot, physics.dt)
         return x, v, L, o, energy, bounces, capped
 
     @wp.func
     def ballistic_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar,
-                        m: scalar, gravity: vec3, origin: vec3, dt: scalar, friction: scalar,
-                        max_rot: scalar, retention: scalar, max_bounces: int,
-                        box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
-                        box_half_extents: wp.array(dtype=vec3),
-                        box_radius: wp.array(dtype=scalar), box_extent: wp.array(dtype=vec3),
-                        box_bvh: wp.uint64, grid_lower: vec3, grid_cell: vec3,
-                        grid_inv_cell: vec3, grid_dims: wp.vec3i, grid_margin: scalar,
-                        grid_cell_start: wp.array(dtype=wp.int32),
-                        grid_cell_boxes: wp.array(dtype=wp.int32), frame: int, sphere: int,
-                        event_count_out: wp.array(dtype=wp.int32),
-                        event_index_out: wp.array2d(dtype=wp.int32),
-                        event_vector_out: wp.array2d(dtype=vec3),
-                        event_scalar_out: wp.array2d(dtype=scalar)):
+                        m: scalar, physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
+                        sphere: int, events: EventBuffer):
         """One frame of the ballistic model (``v`` is the true velocity, before and after).
 
         The motion keeps the energy itself, so without the correction the speed is only ever
         lowered to the energy bound (float error is never turned into a gain); with it, the
         rounding drift is put back through the component along gravity.
         """
-        x, v, L, energy, bounces, capped, supported = path(
-            x, v, r, m, L, energy, gravity, origin, dt, friction, max_rot, retention, max_bounces,
-            box_center, box_rotation, box_half_extents, box_radius, box_extent, box_bvh,
-            grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
-            grid_cell_boxes, frame, sphere, event_count_out, event_index_out, event_vector_out,
-            event_scalar_out)
+        gravity = physics.gravity
+        origin = physics.origin
+        x, v, L, energy, bounces, capped, supported = path(x, v, r, m, L, energy, physics, boxes,
+                                                          broad, frame, sphere, events)
         if wp.static(energy_correction):
             v = energy_along_gravity(v, energy, m, gravity, x, origin, 1)
         else:
             v = energy_along_gravity(v, energy, m, gravity, x, origin, 0)
         if wp.static(spin):
-            rot = rotation_vector(L, inertia(m, r), max_rot)
-            o = integrate_orientation(o, rot, dt)
+            rot = rotation_vector(L, inertia(m, r), physics.max_rot)
+            o = integrate_orientation(o, rot, physics.dt)
         return x, v, L, o, energy, bounces, capped
 
     one_frame = ballistic_frame if motion == "ballistic" else linear_frame
@@ -176,53 +148,33 @@ def frame_kernel(precision_name: str, spin: bool, energy_correction: bool, lossy
     @variant_kernel
     def advance_frames(
         # Model:
-        box_center: wp.array(dtype=vec3),
-        box_rotation: wp.array(dtype=mat33),
-        box_half_extents: wp.array(dtype=vec3),
-        box_radius: wp.array(dtype=scalar),
-        box_extent: wp.array(dtype=vec3),
-        box_bvh: wp.uint64,
-        grid_lower: vec3,
-        grid_cell: vec3,
-        grid_inv_cell: vec3,
-        grid_dims: wp.vec3i,
-        grid_margin: scalar,
-        grid_cell_start: wp.array(dtype=wp.int32),
-        grid_cell_boxes: wp.array(dtype=wp.int32),
-        gravity: vec3,
-        origin: vec3,
-        dt: scalar,
-        friction: scalar,
-        max_rot: scalar,
-        retention: scalar,
-        max_bounces: int,
-        radius: wp.array(dtype=scalar),
-        mass: wp.array(dtype=scalar),
+        boxes: Boxes,
+        broad: BroadPhase,
+        physics: Physics,
+        radius: wp.array[scalar],
+        mass: wp.array[scalar],
         frame_count: int,
         record_every: int,
         sphere_offset: int,
         # In:
-        position_in: wp.array(dtype=vec3),
-        velocity_in: wp.array(dtype=vec3),
-        energy_in: wp.array(dtype=scalar),
-        angular_momentum_in: wp.array(dtype=vec3),
-        orientation_in: wp.array(dtype=quat),
+        position_in: wp.array[vec3],
+        velocity_in: wp.array[vec3],
+        energy_in: wp.array[scalar],
+        angular_momentum_in: wp.array[vec3],
+        orientation_in: wp.array[quat],
         # Out:
-        position_out: wp.array(dtype=vec3),
-        velocity_out: wp.array(dtype=vec3),
-        energy_out: wp.array(dtype=scalar),
-        angular_momentum_out: wp.array(dtype=vec3),
-        orientation_out: wp.array(dtype=quat),
-        bounce_count_out: wp.array(dtype=wp.int32),
-        capped_count_out: wp.array(dtype=wp.int32),
-        record_position_out: wp.array2d(dtype=vec3),
-        record_orientation_out: wp.array2d(dtype=quat),
-        record_velocity_out: wp.array2d(dtype=vec3),
-        record_angular_velocity_out: wp.array2d(dtype=vec3),
-        event_count_out: wp.array(dtype=wp.int32),
-        event_index_out: wp.array2d(dtype=wp.int32),
-        event_vector_out: wp.array2d(dtype=vec3),
-        event_scalar_out: wp.array2d(dtype=scalar),
+        position_out: wp.array[vec3],
+        velocity_out: wp.array[vec3],
+        energy_out: wp.array[scalar],
+        angular_momentum_out: wp.array[vec3],
+        orientation_out: wp.array[quat],
+        bounce_count_out: wp.array[wp.int32],
+        capped_count_out: wp.array[wp.int32],
+        record_position_out: wp.array2d[vec3],
+        record_orientation_out: wp.array2d[quat],
+        record_velocity_out: wp.array2d[vec3],
+        record_angular_velocity_out: wp.array2d[vec3],
+        events_out: EventBuffer,
     ):
         i = wp.tid()
         sphere = sphere_offset + i
@@ -241,12 +193,8 @@ def frame_kernel(precision_name: str, spin: bool, energy_correction: bool, lossy
         row = int(0)
         with_motion = record_velocity_out.shape[0] > 0
         for f in range(frame_count):
-            x, v, L, o, energy, b, c = one_frame(
-                x, v, L, o, energy, r, m, gravity, origin, dt, friction, max_rot, retention,
-                max_bounces, box_center, box_rotation, box_half_extents, box_radius, box_extent,
-                box_bvh, grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin,
-                grid_cell_start, grid_cell_boxes, f + 1, sphere, event_count_out, event_index_out,
-                event_vector_out, event_scalar_out)
+            x, v, L, o, energy, b, c = one_frame(x, v, L, o, energy, r, m, physics, boxes, broad,
+                                                 f + 1, sphere, events_out)
             bounces += b
             capped += c
             if record_every > 0:
@@ -260,7 +208,7 @@ def frame_kernel(precision_name: str, spin: bool, energy_correction: bool, lossy
                         record_velocity_out[row, i] = v
                         if wp.static(spin):
                             record_angular_velocity_out[row, i] = rotation_vector(
-                                L, inertia(m, r), max_rot)
+                                L, inertia(m, r), physics.max_rot)
                         else:
                             record_angular_velocity_out[row, i] = vec3()
                     row += 1

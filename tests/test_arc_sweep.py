@@ -22,8 +22,9 @@ from arc_reference import (
 from helpers import shaped_half_extents
 
 import warpsim as ws
-from warpsim.kernels.nearest import BOUNDS_PAD_REL, REJECT_SLACK, nearest_funcs
-from warpsim.kernels.nearest_arc import nearest_arc_funcs
+from warpsim.kernels.data import model_structs
+from warpsim.kernels.nearest import BOUNDS_PAD_REL, REJECT_SLACK, model_nearest_hit
+from warpsim.kernels.nearest_arc import model_nearest_hit_arc, nearest_arc_funcs
 from warpsim.kernels.precision import precision as precision_of
 
 G = np.array([0.0, -9.81, 0.0])
@@ -49,28 +50,26 @@ def sweep_kernel(precision_name: str):
     """Test kernel: per query, every box's sweep, the nearest hit brute force and by the BVH,
     and the linear nearest hit of the chord ``a -> a + v tau``."""
     p = precision_of(precision_name)
-    scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
-    arcs = nearest_arc_funcs(p)
-    sweep_box_world_arc = arcs.sweep_box_world_arc
-    nearest_hit_arc = arcs.nearest_hit_arc
-    nearest_hit_arc_bvh = arcs.nearest_hit_arc_bvh
-    nearest_hit = nearest_funcs(p).nearest_hit
+    scalar, vec3 = p.scalar, p.vec3
+    Boxes, BroadPhase, _, _ = model_structs(p)
+    sweep_box_world_arc = nearest_arc_funcs(p).sweep_box_world_arc
+    nearest_hit_arc = model_nearest_hit_arc(p, "brute")
+    nearest_hit_arc_bvh = model_nearest_hit_arc(p, "bvh")
+    nearest_hit = model_nearest_hit(p, "brute")
 
     @wp.kernel(enable_backward=False, module="unique")
     def arc_sweep_test(
-        box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
-        box_half_extents: wp.array(dtype=vec3), box_radius: wp.array(dtype=scalar),
-        box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64,
-        a_in: wp.array(dtype=vec3), v_in: wp.array(dtype=vec3), g_in: wp.array(dtype=vec3),
-        tau_in: wp.array(dtype=scalar), r_in: wp.array(dtype=scalar),
-        each_hit: wp.array2d(dtype=wp.int32), each_s: wp.array2d(dtype=scalar),
-        each_normal: wp.array2d(dtype=vec3),
-        brute_box: wp.array(dtype=wp.int32), brute_s: wp.array(dtype=scalar),
-        brute_normal: wp.array(dtype=vec3),
-        bvh_box: wp.array(dtype=wp.int32), bvh_s: wp.array(dtype=scalar),
-        bvh_normal: wp.array(dtype=vec3),
-        linear_box: wp.array(dtype=wp.int32), linear_t: wp.array(dtype=scalar),
-        linear_normal: wp.array(dtype=vec3),
+        boxes: Boxes, broad: BroadPhase,
+        a_in: wp.array[vec3], v_in: wp.array[vec3], g_in: wp.array[vec3],
+        tau_in: wp.array[scalar], r_in: wp.array[scalar],
+        each_hit: wp.array2d[wp.int32], each_s: wp.array2d[scalar],
+        each_normal: wp.array2d[vec3],
+        brute_box: wp.array[wp.int32], brute_s: wp.array[scalar],
+        brute_normal: wp.array[vec3],
+        bvh_box: wp.array[wp.int32], bvh_s: wp.array[scalar],
+        bvh_normal: wp.array[vec3],
+        linear_box: wp.array[wp.int32], linear_t: wp.array[scalar],
+        linear_normal: wp.array[vec3],
     ):
         i = wp.tid()
         a = a_in[i]
@@ -78,24 +77,20 @@ def sweep_kernel(precision_name: str):
         g = g_in[i]
         tau = tau_in[i]
         r = r_in[i]
-        for k in range(box_center.shape[0]):
-            hit, s, n = sweep_box_world_arc(a, v, g, tau, r, box_center[k], box_rotation[k],
-                                            box_half_extents[k], box_radius[k], box_extent[k])
+        for k in range(boxes.center.shape[0]):
+            hit, s, n = sweep_box_world_arc(a, v, g, tau, r, boxes, k)
             each_hit[i, k] = hit
             each_s[i, k] = s
             each_normal[i, k] = n
-        box, s, n = nearest_hit_arc(a, v, g, tau, r, box_center, box_rotation,
-                                    box_half_extents, box_radius, box_extent)
+        box, s, n = nearest_hit_arc(a, v, g, tau, r, boxes, broad)
         brute_box[i] = box
         brute_s[i] = s
         brute_normal[i] = n
-        box, s, n = nearest_hit_arc_bvh(a, v, g, tau, r, box_bvh, box_center, box_rotation,
-                                        box_half_extents, box_radius, box_extent)
+        box, s, n = nearest_hit_arc_bvh(a, v, g, tau, r, boxes, broad)
         bvh_box[i] = box
         bvh_s[i] = s
         bvh_normal[i] = n
-        box, t, n = nearest_hit(a, v * tau, r, box_center, box_rotation, box_half_extents,
-                                box_radius, box_extent)
+        box, t, n = nearest_hit(a, v * tau, r, boxes, broad)
         linear_box[i] = box
         linear_t[i] = t
         linear_normal[i] = n
@@ -104,8 +99,10 @@ def sweep_kernel(precision_name: str):
 
 
 def device_boxes(boxes: ws.RoundedBoxes, p, device="cpu"):
-    """The kernels' box arrays and a BVH over the reject bounds (as the host builds them)."""
+    """The kernels' ``Boxes`` and a ``BroadPhase`` holding a BVH over the reject bounds (built
+    here as the host builds it; no grid)."""
     dt = p.np_dtype
+    structs = model_structs(p)
     center = boxes.center.astype(dt)
     extent = boxes.world_extent().astype(dt)
     c, e = center.astype(np.float64), extent.astype(np.float64) * (1.0 + REJECT_SLACK)
@@ -115,12 +112,20 @@ def device_boxes(boxes: ws.RoundedBoxes, p, device="cpu"):
     upper = np.nextafter(upper, np.float32(np.inf))
     bvh = wp.Bvh(wp.array(lower, dtype=wp.vec3f, device=device),
                  wp.array(upper, dtype=wp.vec3f, device=device))
-    arrays = [wp.array(center, dtype=p.vec3, device=device),
-              wp.array(boxes.rotation_matrices().astype(dt), dtype=p.mat33, device=device),
-              wp.array(boxes.half_extents.astype(dt), dtype=p.vec3, device=device),
-              wp.array(boxes.radius.astype(dt), dtype=p.scalar, device=device),
-              wp.array(extent, dtype=p.vec3, device=device)]
-    return arrays, bvh
+    out = structs.Boxes()
+    out.center = wp.array(center, dtype=p.vec3, device=device)
+    out.rotation = wp.array(boxes.rotation_matrices().astype(dt), dtype=p.mat33, device=device)
+    out.half_extents = wp.array(boxes.half_extents.astype(dt), dtype=p.vec3, device=device)
+    out.radius = wp.array(boxes.radius.astype(dt), dtype=p.scalar, device=device)
+    out.extent = wp.array(extent, dtype=p.vec3, device=device)
+    broad = structs.BroadPhase()
+    broad.bvh = wp.uint64(bvh.id)
+    broad.lower, broad.cell, broad.inv_cell = p.vec3(), p.vec3(1, 1, 1), p.vec3(1, 1, 1)
+    broad.dims = wp.vec3i(0, 0, 0)
+    broad.margin = p.scalar(0.0)
+    broad.cell_start = wp.zeros(2, dtype=wp.int32, device=device)
+    broad.cell_boxes = wp.zeros(1, dtype=wp.int32, device=device)
+    return out, broad, bvh
 
 
 def sweep(boxes, a, v, g, tau, r, precision_name="float64", device="cpu"):
@@ -129,7 +134,7 @@ def sweep(boxes, a, v, g, tau, r, precision_name="float64", device="cpu"):
     boxes = boxes.as_boxes() if isinstance(boxes, ws.RoundedBox) else boxes
     n = len(a)
     k = len(boxes)
-    arrays, bvh = device_boxes(boxes, p, device)
+    device_structs = device_boxes(boxes, p, device)
 
     def put(x, dtype):
         return wp.array(np.ascontiguousarray(x, dtype=p.np_dtype), dtype=dtype, device=device)
@@ -150,8 +155,8 @@ def sweep(boxes, a, v, g, tau, r, precision_name="float64", device="cpu"):
     shapes = [(n, k)] * 3 + [(n,)] * 9
     outs = [full(s, d, np.inf) for s, d in zip(shapes, kinds, strict=True)]
     wp.launch(sweep_kernel(p.name), dim=n, device=device,
-              inputs=arrays + [wp.uint64(bvh.id), put(a, p.vec3), put(v, p.vec3),
-                               put(g, p.vec3), put(tau, p.scalar), put(r, p.scalar)],
+              inputs=[*device_structs[:2], put(a, p.vec3), put(v, p.vec3), put(g, p.vec3),
+                      put(tau, p.scalar), put(r, p.scalar)],
               outputs=outs)
     return {name: o.numpy() for name, o in zip(names, outs, strict=True)}
 

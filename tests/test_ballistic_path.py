@@ -20,7 +20,7 @@ from test_arc_sweep import device_boxes
 
 import warpsim as ws
 from warpsim.kernels.ballistic import ballistic_funcs
-from warpsim.kernels.nearest_arc import uses_bvh
+from warpsim.kernels.data import BROAD_PHASES, Features, model_structs
 from warpsim.kernels.precision import precision as precision_of
 from warpsim.model import event_buffer
 
@@ -45,36 +45,26 @@ ENERGY_TOL = {"float32": 2e-5, "float64": 1e-12}
 def path_kernel(precision_name: str, lossy: bool, spin: bool):
     """Test kernel: one frame of ``ballistic_path`` per sphere (brute-force boxes)."""
     p = precision_of(precision_name)
-    scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
-    ballistic_path = ballistic_funcs(p, spin, lossy, False).ballistic_path
+    scalar, vec3 = p.scalar, p.vec3
+    Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
+    ballistic_path = ballistic_funcs(Features(precision=precision_name, motion="ballistic",
+                                              spin=spin, lossy=lossy)).ballistic_path
 
     @wp.kernel(enable_backward=False, module="unique")
     def ballistic_path_test(
-        box_center: wp.array(dtype=vec3), box_rotation: wp.array(dtype=mat33),
-        box_half_extents: wp.array(dtype=vec3), box_radius: wp.array(dtype=scalar),
-        box_extent: wp.array(dtype=vec3), box_bvh: wp.uint64,
-        gravity: vec3, origin: vec3, dt: scalar, friction: scalar, max_rot: scalar,
-        retention: scalar, radius: wp.array(dtype=scalar), mass: wp.array(dtype=scalar),
-        position_in: wp.array(dtype=vec3), velocity_in: wp.array(dtype=vec3),
-        angular_momentum_in: wp.array(dtype=vec3), energy_in: wp.array(dtype=scalar),
-        position_out: wp.array(dtype=vec3), velocity_out: wp.array(dtype=vec3),
-        angular_momentum_out: wp.array(dtype=vec3), energy_out: wp.array(dtype=scalar),
-        bounce_count: wp.array(dtype=wp.int32), capped_count: wp.array(dtype=wp.int32),
-        supported_count: wp.array(dtype=wp.int32), grid_cell_start: wp.array(dtype=wp.int32),
-        grid_cell_boxes: wp.array(dtype=wp.int32), event_count_out: wp.array(dtype=wp.int32),
-        event_index_out: wp.array2d(dtype=wp.int32), event_vector_out: wp.array2d(dtype=vec3),
-        event_scalar_out: wp.array2d(dtype=scalar),
+        boxes: Boxes, broad: BroadPhase, physics: Physics,
+        radius: wp.array[scalar], mass: wp.array[scalar],
+        position_in: wp.array[vec3], velocity_in: wp.array[vec3],
+        angular_momentum_in: wp.array[vec3], energy_in: wp.array[scalar],
+        position_out: wp.array[vec3], velocity_out: wp.array[vec3],
+        angular_momentum_out: wp.array[vec3], energy_out: wp.array[scalar],
+        bounce_count: wp.array[wp.int32], capped_count: wp.array[wp.int32],
+        supported_count: wp.array[wp.int32], events_out: EventBuffer,
     ):
         i = wp.tid()
         x, v, ang, e, bounces, capped, supported = ballistic_path(
             position_in[i], velocity_in[i], radius[i], mass[i], angular_momentum_in[i],
-            energy_in[i], gravity, origin, dt, friction, max_rot, retention, MAX_BOUNCES,
-            box_center,
-            box_rotation, box_half_extents, box_radius, box_extent, box_bvh, vec3(),
-            vec3(scalar(1.0), scalar(1.0), scalar(1.0)), vec3(scalar(1.0), scalar(1.0),
-                                                             scalar(1.0)),
-            wp.vec3i(0, 0, 0), scalar(0.0), grid_cell_start, grid_cell_boxes, 0, i,
-            event_count_out, event_index_out, event_vector_out, event_scalar_out)
+            energy_in[i], physics, boxes, broad, 0, i, events_out)
         position_out[i] = x
         velocity_out[i] = v
         angular_momentum_out[i] = ang
@@ -92,7 +82,13 @@ def run(boxes, x, v, frames, dt, precision_name="float64", radius=R, retention=1
     p = precision_of(precision_name)
     dtp = p.np_dtype
     n = len(x)
-    arrays, bvh = device_boxes(boxes, p)
+    device_structs = device_boxes(boxes, p)
+    physics = model_structs(p).Physics()
+    physics.gravity = p.vec3(0.0, -GRAVITY, 0.0)
+    physics.origin = p.vec3(0.0, 0.0, 0.0)
+    physics.dt, physics.friction = p.scalar(dt), p.scalar(friction)
+    physics.max_rot, physics.retention = p.scalar(50.0), p.scalar(retention)
+    physics.max_bounces = MAX_BOUNCES
     g = np.array([0.0, -GRAVITY, 0.0])
     mass = np.ones(n)
     r = np.broadcast_to(np.asarray(radius, float), (n,))
@@ -110,12 +106,9 @@ def run(boxes, x, v, frames, dt, precision_name="float64", radius=R, retention=1
     kernel = path_kernel(p.name, retention < 1.0, spin)
     history = []
     for _ in range(frames):
-        wp.launch(kernel, dim=n, inputs=arrays + [
-            wp.uint64(bvh.id), p.vec3(*g), p.vec3(0.0, 0.0, 0.0), p.scalar(dt),
-            p.scalar(friction), p.scalar(50.0), p.scalar(retention), put(r, p.scalar),
-            put(mass, p.scalar)] + state,
-            outputs=spare + counts + [wp.zeros(2, dtype=wp.int32), wp.zeros(1, dtype=wp.int32)]
-            + list(event_buffer(p, "cpu", 0).values()))
+        wp.launch(kernel, dim=n, inputs=[*device_structs[:2], physics, put(r, p.scalar),
+                                         put(mass, p.scalar), *state],
+                  outputs=[*spare, *counts, event_buffer(p, "cpu", 0)])
         state, spare = spare, state
         if record:
             history.append(state[0].numpy().astype(float))
@@ -361,12 +354,13 @@ def test_invariants(seed, retention, dt):
 
 
 def test_broad_phase_names():
-    """The arcs take every broad phase of the chords, by flag or by name; others are refused.
-    ``uses_bvh`` says whether the BVH is (or backs) the query."""
-    assert uses_bvh(True) and uses_bvh("bvh") and uses_bvh("grid-bvh")
-    assert not uses_bvh(False) and not uses_bvh("brute") and not uses_bvh("grid")
-    with pytest.raises(ValueError, match="broad_phase"):
-        uses_bvh("octree")
+    """The arcs take every broad phase of the chords by name; others (a flag included) are
+    refused by the features record, naming the field."""
+    for name in BROAD_PHASES:
+        assert Features(motion="ballistic", broad_phase=name).broad_phase == name
+    for bad in ("octree", True, False):
+        with pytest.raises(ValueError, match="broad_phase"):
+            Features(motion="ballistic", broad_phase=bad)
 
 
 def test_far_from_origin():

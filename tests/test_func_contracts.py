@@ -22,9 +22,9 @@ def slab_kernel(name: str):
     segment_slab = slab_funcs(p).segment_slab
 
     @variant_kernel
-    def run(a: wp.array(dtype=p.vec3), d: wp.array(dtype=p.vec3), g: wp.array(dtype=p.vec3),
-            hit_out: wp.array(dtype=wp.int32), t_enter_out: wp.array(dtype=p.scalar),
-            t_exit_out: wp.array(dtype=p.scalar), axis_out: wp.array(dtype=wp.int32)):
+    def run(a: wp.array[p.vec3], d: wp.array[p.vec3], g: wp.array[p.vec3],
+            hit_out: wp.array[wp.int32], t_enter_out: wp.array[p.scalar],
+            t_exit_out: wp.array[p.scalar], axis_out: wp.array[wp.int32]):
         i = wp.tid()
         hit, t_enter, t_exit, axis = segment_slab(a[i], d[i], g[i])
         hit_out[i] = hit
@@ -42,10 +42,10 @@ def capsule_kernel(name: str):
     segment_capsule, segment_sphere = funcs.segment_capsule, funcs.segment_sphere
 
     @variant_kernel
-    def run(a: wp.array(dtype=p.vec3), d: wp.array(dtype=p.vec3), e0: wp.array(dtype=p.vec3),
-            e1: wp.array(dtype=p.vec3), radius: wp.array(dtype=p.scalar),
-            sphere: wp.array(dtype=wp.int32), hit_out: wp.array(dtype=wp.int32),
-            t_out: wp.array(dtype=p.scalar), normal_out: wp.array(dtype=p.vec3)):
+    def run(a: wp.array[p.vec3], d: wp.array[p.vec3], e0: wp.array[p.vec3],
+            e1: wp.array[p.vec3], radius: wp.array[p.scalar],
+            sphere: wp.array[wp.int32], hit_out: wp.array[wp.int32],
+            t_out: wp.array[p.scalar], normal_out: wp.array[p.vec3]):
         i = wp.tid()
         hit = int(0)  # noqa: UP018 (a dynamic Warp variable, not a constant)
         t = p.scalar(0.0)

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import warpsim as ws
-from warpsim.kernels.collide_kernels import bounce_kernel, collide_arc_kernel, collide_kernel
+from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
+from warpsim.kernels.data import MOTIONS, Features
 from warpsim.kernels.frame_kernel import frame_kernel
 from warpsim.kernels.nearest import BROAD_PHASES
 from warpsim.kernels.variant import KERNEL_OPTIONS
@@ -28,24 +29,18 @@ FLAGS = (False, True)
 
 
 def all_kernels():
-    """(label, kernel) for every variant of every factory (two values of max_bounces)."""
+    """(label, kernel) for every variant of every factory."""
     out = []
-    for prec, bvh in itertools.product(PRECISIONS, BROAD_PHASES):
-        out.append((f"collide/{prec}/{bvh}", collide_kernel(prec, bvh)))
-        out.append((f"collide-arc/{prec}/{bvh}", collide_arc_kernel(prec, bvh)))
-    for prec, spin, lossy, bvh in itertools.product(PRECISIONS, FLAGS, FLAGS, BROAD_PHASES):
-        out.append((f"bounce/{prec}/{spin}/{lossy}/{bvh}",
-                    bounce_kernel(prec, spin, lossy, bvh)))
-        out.append((f"bounce-arc/{prec}/{spin}/{lossy}/{bvh}",
-                    bounce_kernel(prec, spin, lossy, bvh, motion="ballistic")))
-    for prec, spin, corr, lossy, bvh in itertools.product(PRECISIONS, FLAGS, FLAGS, FLAGS,
-                                                          BROAD_PHASES):
-        for events in FLAGS:
-            out.append((f"frame/{prec}/{spin}/{corr}/{lossy}/{bvh}/{events}",
-                        frame_kernel(prec, spin, corr, lossy, bvh, events=events)))
-            out.append((f"frame-arc/{prec}/{spin}/{corr}/{lossy}/{bvh}/{events}",
-                        frame_kernel(prec, spin, corr, lossy, bvh, events=events,
-                                     motion="ballistic")))
+    for prec, motion, bvh in itertools.product(PRECISIONS, MOTIONS, BROAD_PHASES):
+        f = Features(precision=prec, motion=motion, broad_phase=bvh)
+        out.append((f"collide/{prec}/{motion}/{bvh}", collide_kernel(f)))
+        for spin, lossy in itertools.product(FLAGS, FLAGS):
+            out.append((f"bounce/{prec}/{motion}/{spin}/{lossy}/{bvh}",
+                        bounce_kernel(f.but(spin=spin, lossy=lossy))))
+            for corr, events in itertools.product(FLAGS, FLAGS):
+                out.append((f"frame/{prec}/{motion}/{spin}/{corr}/{lossy}/{bvh}/{events}",
+                            frame_kernel(f.but(spin=spin, lossy=lossy, energy_correction=corr,
+                                               events=events))))
     return out
 
 
@@ -77,7 +72,7 @@ FRAME_COUNTERS = {"bounce_count_out", "capped_count_out", "record_position_out",
 #: Plain per-launch values (the launch helper's ``values``).
 LAUNCH_VALUES = {"frame_count", "record_every", "sphere_offset"}
 #: Outputs of a whole launch (the launch helper's ``launch_outputs``).
-EVENT_OUTPUTS = {"event_count_out", "event_index_out", "event_vector_out", "event_scalar_out"}
+EVENT_OUTPUTS = {"events_out"}
 
 
 @pytest.mark.parametrize("label,kernel", KERNELS, ids=[k[0] for k in KERNELS])
@@ -103,7 +98,7 @@ def test_every_simulator_argument_is_the_named_array():
                      radius=0.1)
     sim = ws.Simulator(ws.Scene(boxes, friction=0.1), swarm, device="cpu")
     records = sim._records(2, True)
-    events = event_buffer(sim.model.precision, sim.device, 4)
+    events = {"events_out": event_buffer(sim.model.precision, sim.device, 4)}
     values = {"frame_count": 3, "record_every": 2, "sphere_offset": 0}
     args = kernel_arguments(sim._kernel, model=sim.model, spheres=sim.spheres,
                             state_in=sim.state_0, state_out=sim.state_1,
@@ -119,18 +114,44 @@ def test_every_simulator_argument_is_the_named_array():
         elif name in LAUNCH_VALUES:
             assert value == values[name]
         elif name in model_fields():
-            assert value is getattr(sim.model, name) or value == getattr(sim.model, name)
+            assert value is getattr(sim.model, name)
         else:
             assert value is getattr(sim.spheres, name)
 
 
 def test_missing_or_ambiguous_source_is_an_error():
-    kernel = collide_kernel("float32", "brute")
-    with pytest.raises(KeyError, match="no source provides parameter 'box_center'"):
+    kernel = collide_kernel(Features())
+    with pytest.raises(KeyError, match="no source provides parameter 'boxes'"):
         kernel_arguments(kernel, state_in={}, outputs={})
     sim_boxes = ws.RoundedBoxes(center=[[0, 0, 0]], half_extents=[[1, 1, 1]])
     sim = ws.Simulator(ws.Scene(sim_boxes), ws.Swarm([[0, 3, 0]], [[0, 0, 0]]), device="cpu")
     with pytest.raises(KeyError, match="both"):
         kernel_arguments(sim._kernel, model=sim.model, spheres=sim.spheres,
-                         values={"dt": np.float32(0.1)}, state_in=sim.state_0,
+                         values={"physics": np.float32(0.1)}, state_in=sim.state_0,
                          state_out=sim.state_1, outputs=sim.counters)
+
+
+def test_model_structs_hold_the_named_data():
+    """Inside the model's structs every field holds its own quantity, in the boxes' order: the
+    host values (float64, independent of the device copy) come back field by field."""
+    rng = np.random.default_rng(5)
+    q = rng.normal(size=(3, 4))
+    boxes = ws.RoundedBoxes(center=rng.uniform(-3, 3, (3, 3)),
+                            half_extents=rng.uniform(0.1, 1, (3, 3)),
+                            rotation=q / np.linalg.norm(q, axis=1, keepdims=True),
+                            radius=[0.0, 0.05, 0.2])
+    scene = ws.Scene(boxes, gravity=(0.5, -9.0, 0.25), friction=0.3, energy_retention=0.75,
+                     max_angular_speed=20.0)
+    sim = ws.Simulator(scene, ws.Swarm([[0, 9, 0]], [[0, 0, 0]], radius=0.1), device="cpu",
+                       precision="float64", max_bounces=5)
+    m = sim.model
+    expected = {"center": boxes.center, "rotation": boxes.rotation_matrices(),
+                "half_extents": boxes.half_extents, "radius": boxes.radius,
+                "extent": boxes.world_extent()}
+    for name, host in expected.items():
+        assert np.array_equal(getattr(m.boxes, name).numpy(), host), name
+    ph = m.physics
+    assert tuple(ph.gravity) == (0.5, -9.0, 0.25)
+    assert tuple(ph.origin) == tuple(sim.energy_origin)
+    assert (float(ph.dt), float(ph.friction), float(ph.max_rot), float(ph.retention),
+            int(ph.max_bounces)) == (sim.dt, 0.3, 20.0, 0.75, 5)

@@ -1,7 +1,7 @@
 """The broad phase: which boxes a sphere's frame path can reach, and the choice between methods.
 
 Three ways to find a sphere's candidate boxes, all bit-identical to trying every box (each only
-skips boxes that the per-box reject of ``kernels.nearest.sweep_box_world`` would refuse, and ties
+skips boxes that the per-box reject of ``kernels.candidates`` (``apart``) would refuse, and ties
 go to the lower index):
 
 - ``"brute"``: every box, in index order. Best for a handful of boxes.
@@ -27,7 +27,7 @@ import numpy as np
 
 from . import validation as check
 from .device import BVH_MIN_BOXES, bvh_bounds
-from .kernels.nearest import BOUNDS_PAD_ABS, BOUNDS_PAD_REL
+from .kernels.candidates import BOUNDS_PAD_ABS, BOUNDS_PAD_REL
 from .obstacles import RoundedBoxes
 
 #: The grid's margin is the reach of this share of the spheres' first frame (path length plus
@@ -200,7 +200,7 @@ def choose(requested: str, boxes: RoundedBoxes, reach_m: float, dtype=np.float32
         dtype: the kernels' float type.
 
     Returns:
-        ``(name, grid)`` with ``name`` one of ``kernels.nearest.BROAD_PHASES``.
+        ``(name, grid)`` with ``name`` one of ``kernels.data.BROAD_PHASES``.
     """
     choice = check.broad_phase(requested)
     if choice in ("brute", "bvh"):

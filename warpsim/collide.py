@@ -12,7 +12,8 @@ from . import broad_phase as broad
 from . import validation as check
 from .device import resolve_device
 from .kernels import precision as fp
-from .kernels.collide_kernels import bounce_kernel, collide_arc_kernel, collide_kernel
+from .kernels.collide_kernels import bounce_kernel, collide_kernel
+from .kernels.data import Features
 from .model import Spheres, event_buffer, launch, put_model, to_device
 from .obstacles import RoundedBox, RoundedBoxes
 from .swarm import Swarm
@@ -98,8 +99,7 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
            "t_out": wp.empty(n, dtype=p.scalar, device=dev)}
     for name in ("contact_out", "normal_out", "new_position_out", "new_velocity_out"):
         out[name] = wp.empty(n, dtype=p.vec3, device=dev)
-    kernel = (collide_kernel(p.name, method) if motion == "linear"
-              else collide_arc_kernel(p.name, method))
+    kernel = collide_kernel(Features(precision=p.name, motion=motion, broad_phase=method))
     launch(kernel, n, dev, model=model, spheres=spheres, state_in=state, outputs=out)
     box = out["box_out"].numpy()
     return Contacts(hit=box >= 0, t=out["t_out"].numpy(), position=out["contact_out"].numpy(),
@@ -209,8 +209,8 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
     dev = resolve_device(device)
     method, grid = broad.choose(broad_phase, boxes, broad.reach(pos, vel, rad, g, dt),
                                 p.np_dtype)
-    kernel = bounce_kernel(p.name, friction > 0.0, retention < 1.0, method,
-                           **({} if motion == "linear" else {"motion": motion}))
+    kernel = bounce_kernel(Features(precision=p.name, motion=motion, broad_phase=method,
+                                    spin=friction > 0.0, lossy=retention < 1.0))
     model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt, gravity=g,
                       friction=friction,
                       max_angular_speed=max_rot, energy_retention=retention,
@@ -225,7 +225,7 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
     for name in ("position_out", "velocity_out", "angular_momentum_out"):
         out[name] = wp.empty(n, dtype=p.vec3, device=dev)
     launch(kernel, n, dev, model=model, spheres=spheres, state_in=state, outputs=out,
-           launch_outputs=event_buffer(p, dev, 0))
+           launch_outputs={"events_out": event_buffer(p, dev, 0)})
     bounces, capped = out["bounces_out"], out["capped_out"]
     outs = [out["position_out"], out["velocity_out"], out["angular_momentum_out"]]
     b = bounces.numpy()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from .kernels.nearest import BOUNDS_PAD_REL, REJECT_SLACK
+from .kernels.candidates import BOUNDS_PAD_REL, REJECT_SLACK
 
 #: Without a grid, the BVH is used from this many boxes on, every box below
 #: (``warpsim.broad_phase.exhaustive``: the fallback of the grid, and ``"auto"``'s choice when
@@ -28,7 +28,7 @@ def resolve_device(device=None) -> wp.context.Device:
 def bvh_bounds(center: np.ndarray, extent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """float32 BVH bounds [m], world frame, (K, 3) each, that contain the per-box reject's.
 
-    The reject (``kernels.nearest.sweep_box_world``) lets a box through when the segment comes
+    The reject (``kernels.candidates``' ``apart``) lets a box through when the segment comes
     within ``extent (1 + REJECT_SLACK)`` of its centre (plus the sphere's part); these bounds
     hold that box, padded by ``BOUNDS_PAD_REL`` of the coordinates for the reject's rounding,
     and rounded outward to float32.

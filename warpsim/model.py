@@ -2,17 +2,19 @@
 
 Three bundles of Warp arrays, each made at one validating boundary:
 
-- :class:`Model` (:func:`put_model`): the static scene (obstacles and physics constants). Its
-  field names *are* the kernels' ``# Model`` parameter names (``box_center``, ``gravity``, ...).
+- :class:`Model` (:func:`put_model`): the static scene as the kernels' three ``# Model`` structs
+  (``kernels.data.model_structs``): the obstacles ``boxes``, the broad phase's ``broad`` and the
+  constants ``physics``. Its field names *are* the kernels' parameter names.
 - :class:`Spheres` (:func:`put_spheres`): the per-sphere constants (``radius``, ``mass``).
 - :class:`DeviceState` (:func:`put_state`): the per-sphere state that a frame changes. A kernel
   reads it through parameters named ``<field>_in`` and writes a second one through
   ``<field>_out``; the simulator swaps ``state_0`` and ``state_1`` after each launch.
 
 :func:`kernel_arguments` builds a launch's argument list from these bundles *by parameter name*
-(``position_in`` is ``state_in.position``, ``box_radius`` is ``model.box_radius``, any other
-``*_out`` comes from ``outputs``), so a reordering of a kernel's parameters can never silently swap
-two arrays, and every launch of the package goes through :func:`launch`.
+(``position_in`` is ``state_in.position``, ``boxes`` is ``model.boxes``, any other ``*_out`` comes
+from ``outputs``), so a reordering of a kernel's parameters can never silently swap two arrays,
+and every launch of the package goes through :func:`launch`. Inside a struct the fields are
+named too (``model.boxes.radius``), so nothing is ever bound by position.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import warp as wp
 
 from .broad_phase import Grid
 from .device import bvh_bounds
+from .kernels.data import model_structs
 from .kernels.precision import Precision
 from .obstacles import RoundedBoxes
 
@@ -35,52 +38,26 @@ OUT_SUFFIX = "_out"
 class Model:
     """A scene's obstacles and physics constants on one device, in one precision.
 
-    Field names are the kernels' parameter names. Per obstacle (``K`` boxes), world frame:
+    Field names are the kernels' parameter names; each struct's fields are documented with
+    their units and shapes in ``kernels.data.model_structs``.
 
     Attributes:
-        box_center: box centres [m], shape (K,) of vec3.
-        box_rotation: local -> world rotation matrices, shape (K,) of mat33.
-        box_half_extents: core half extents [m], local frame, shape (K,) of vec3.
-        box_radius: rounding radii [m], shape (K,).
-        box_extent: half sizes of each rounded box's world-axis-aligned bounding box [m], shape
-            (K,) of vec3, for the cheap per-box reject.
-        box_bvh: id of a :class:`warp.Bvh` over the reject bounds (float32, rounded outward), or
-            0 when no BVH was built (then kernels built without the BVH never read it).
-        grid_lower, grid_cell, grid_inv_cell, grid_dims, grid_margin, grid_cell_start,
-            grid_cell_boxes: the uniform grid of :class:`warpsim.broad_phase.Grid` (lowest
-            corner [m], cell size [m] and its inverse, cells per axis, the kernels' margin [m],
-            CSR cell lists); a single empty cell when the scene runs without a grid (kernels
-            built without it never read them).
-        gravity: [m/s^2], world frame. origin: reference point of the potential energy [m].
-        dt: frame duration [s]. friction: ``k_f`` [kg/s]. max_rot: clamp on ``|Rot|`` [rad/s].
-        retention: fraction of the kinetic energy kept at each contact.
-        max_bounces: cap on contacts per sphere per frame (a launch value, not compiled in).
+        boxes: the obstacles (``Boxes``: centres, rotations local -> world, core half extents,
+            rounding radii, world bounding-box half sizes; ``K`` boxes, world frame).
+        broad: the broad phase's data (``BroadPhase``: the BVH's id, 0 when none was built,
+            and the uniform grid of :class:`warpsim.broad_phase.Grid`, a single empty cell when
+            the scene runs without one; kernels built without them never read them).
+        physics: the constants (``Physics``: gravity, the potential's origin, ``dt``, friction,
+            the ``|Rot|`` clamp, the retention, the cap on contacts per sphere per frame).
         precision: the :class:`~warpsim.kernels.precision.Precision` of every array and value.
         device: the Warp device holding the arrays.
-        bvh: the :class:`warp.Bvh` behind ``box_bvh`` (kept here so that it lives as long as the
-            model), or None.
+        bvh: the :class:`warp.Bvh` behind ``broad.bvh`` (kept here so that it lives as long as
+            the model), or None.
     """
 
-    box_center: wp.array
-    box_rotation: wp.array
-    box_half_extents: wp.array
-    box_radius: wp.array
-    box_extent: wp.array
-    box_bvh: wp.uint64
-    grid_lower: object
-    grid_cell: object
-    grid_inv_cell: object
-    grid_dims: wp.vec3i
-    grid_margin: object
-    grid_cell_start: wp.array
-    grid_cell_boxes: wp.array
-    gravity: object
-    origin: object
-    dt: object
-    friction: object
-    max_rot: object
-    retention: object
-    max_bounces: int
+    boxes: object
+    broad: object
+    physics: object
     precision: Precision
     device: object
     bvh: wp.Bvh | None = None
@@ -146,7 +123,7 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
         boxes: the obstacles (float64, world frame).
         p: precision of the arrays and scalars.
         device: Warp device.
-        broad_phase: the kernels' broad phase (``kernels.nearest.BROAD_PHASES``): ``"bvh"`` and
+        broad_phase: the kernels' broad phase (``kernels.data.BROAD_PHASES``): ``"bvh"`` and
             ``"grid-bvh"`` build a BVH over the boxes (``box_bvh``; none without boxes).
         grid: the grid of ``"grid"`` and ``"grid-bvh"`` (:func:`warpsim.broad_phase.choose`).
         dt: frame duration [s]. gravity: [m/s^2]. origin: potential reference point [m].
@@ -155,6 +132,7 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
         max_bounces: cap on contacts per sphere per frame.
     """
     dtype = p.np_dtype
+    structs = model_structs(p)
     center = boxes.center.astype(dtype)
     extent = boxes.world_extent().astype(dtype)
     if broad_phase in ("grid", "grid-bvh") and grid is None:
@@ -166,37 +144,49 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
         # the query stack's size (a static scene builds it once)
         tree = wp.Bvh(wp.array(lower, dtype=wp.vec3f, device=device),
                       wp.array(upper, dtype=wp.vec3f, device=device), constructor="sah")
-    return Model(
-        box_center=wp.array(center, dtype=p.vec3, device=device),
-        box_rotation=wp.array(boxes.rotation_matrices().astype(dtype), dtype=p.mat33,
-                              device=device),
-        box_half_extents=wp.array(boxes.half_extents.astype(dtype), dtype=p.vec3, device=device),
-        box_radius=wp.array(boxes.radius.astype(dtype), dtype=p.scalar, device=device),
-        box_extent=wp.array(extent, dtype=p.vec3, device=device),
-        box_bvh=wp.uint64(tree.id if tree is not None else 0),
-        **_grid_fields(grid if broad_phase in ("grid", "grid-bvh") else None, p, device),
-        gravity=p.vec3(*np.asarray(gravity, dtype=np.float64)),
-        origin=p.vec3(*np.asarray(origin, dtype=np.float64)),
-        dt=p.scalar(dt), friction=p.scalar(friction), max_rot=p.scalar(max_angular_speed),
-        retention=p.scalar(energy_retention), max_bounces=int(max_bounces), precision=p,
-        device=device, bvh=tree)
+    device_boxes = structs.Boxes()
+    device_boxes.center = wp.array(center, dtype=p.vec3, device=device)
+    device_boxes.rotation = wp.array(boxes.rotation_matrices().astype(dtype), dtype=p.mat33,
+                                     device=device)
+    device_boxes.half_extents = wp.array(boxes.half_extents.astype(dtype), dtype=p.vec3,
+                                         device=device)
+    device_boxes.radius = wp.array(boxes.radius.astype(dtype), dtype=p.scalar, device=device)
+    device_boxes.extent = wp.array(extent, dtype=p.vec3, device=device)
+    broad = _broad_phase(structs.BroadPhase(),
+                         grid if broad_phase in ("grid", "grid-bvh") else None, p, device)
+    broad.bvh = wp.uint64(tree.id if tree is not None else 0)
+    physics = structs.Physics()
+    physics.gravity = p.vec3(*np.asarray(gravity, dtype=np.float64))
+    physics.origin = p.vec3(*np.asarray(origin, dtype=np.float64))
+    physics.dt = p.scalar(dt)
+    physics.friction = p.scalar(friction)
+    physics.max_rot = p.scalar(max_angular_speed)
+    physics.retention = p.scalar(energy_retention)
+    physics.max_bounces = int(max_bounces)
+    return Model(boxes=device_boxes, broad=broad, physics=physics, precision=p, device=device,
+                 bvh=tree)
 
 
-def _grid_fields(grid: Grid | None, p: Precision, device) -> dict:
-    """The ``grid_*`` fields of a :class:`Model` (one empty cell without a grid)."""
+def _broad_phase(broad, grid: Grid | None, p: Precision, device):
+    """``broad`` (a ``BroadPhase``) with the grid's fields set (one empty cell without a grid)."""
     if grid is None:
-        return {"grid_lower": p.vec3(0.0, 0.0, 0.0), "grid_cell": p.vec3(1.0, 1.0, 1.0),
-                "grid_inv_cell": p.vec3(1.0, 1.0, 1.0),
-                "grid_dims": wp.vec3i(0, 0, 0), "grid_margin": p.scalar(0.0),
-                "grid_cell_start": wp.zeros(2, dtype=wp.int32, device=device),
-                "grid_cell_boxes": wp.zeros(1, dtype=wp.int32, device=device)}
-    return {"grid_lower": p.vec3(*grid.lower), "grid_cell": p.vec3(*grid.cell),
-            "grid_inv_cell": p.vec3(*grid.inv_cell),
-            "grid_dims": wp.vec3i(*(int(x) for x in grid.dims)),
-            "grid_margin": p.scalar(grid.kernel_margin),
-            "grid_cell_start": wp.array(grid.cell_start, dtype=wp.int32, device=device),
-            "grid_cell_boxes": wp.array(np.append(grid.cell_boxes, np.int32(0)),
-                                        dtype=wp.int32, device=device)}
+        broad.lower = p.vec3(0.0, 0.0, 0.0)
+        broad.cell = p.vec3(1.0, 1.0, 1.0)
+        broad.inv_cell = p.vec3(1.0, 1.0, 1.0)
+        broad.dims = wp.vec3i(0, 0, 0)
+        broad.margin = p.scalar(0.0)
+        broad.cell_start = wp.zeros(2, dtype=wp.int32, device=device)
+        broad.cell_boxes = wp.zeros(1, dtype=wp.int32, device=device)
+        return broad
+    broad.lower = p.vec3(*grid.lower)
+    broad.cell = p.vec3(*grid.cell)
+    broad.inv_cell = p.vec3(*grid.inv_cell)
+    broad.dims = wp.vec3i(*(int(x) for x in grid.dims))
+    broad.margin = p.scalar(grid.kernel_margin)
+    broad.cell_start = wp.array(grid.cell_start, dtype=wp.int32, device=device)
+    broad.cell_boxes = wp.array(np.append(grid.cell_boxes, np.int32(0)), dtype=wp.int32,
+                                device=device)
+    return broad
 
 
 def put_spheres(radius: np.ndarray, mass: np.ndarray, p: Precision, device) -> Spheres:
@@ -215,14 +205,16 @@ def put_state(p: Precision, device, *, position, velocity, energy, angular_momen
                        orientation=to_device(orientation, p.quat, p, device))
 
 
-def event_buffer(p: Precision, device, capacity: int) -> dict:
-    """An empty event buffer of ``capacity`` rows for one launch (``kernels.bounce``): the
-    kernels' ``event_*_out`` arrays by name; capacity 0 is the buffer of launches without
+def event_buffer(p: Precision, device, capacity: int):
+    """An empty event buffer of ``capacity`` rows for one launch: a ``kernels.data``
+    ``EventBuffer``, the kernels' ``events_out``; capacity 0 is the buffer of launches without
     events (never written)."""
-    return {"event_count_out": wp.zeros(1, dtype=wp.int32, device=device),
-            "event_index_out": wp.empty((capacity, 4), dtype=wp.int32, device=device),
-            "event_vector_out": wp.empty((capacity, 2), dtype=p.vec3, device=device),
-            "event_scalar_out": wp.empty((capacity, 2), dtype=p.scalar, device=device)}
+    buffer = model_structs(p).EventBuffer()
+    buffer.count = wp.zeros(1, dtype=wp.int32, device=device)
+    buffer.index = wp.empty((capacity, 4), dtype=wp.int32, device=device)
+    buffer.vector = wp.empty((capacity, 2), dtype=p.vec3, device=device)
+    buffer.value = wp.empty((capacity, 2), dtype=p.scalar, device=device)
+    return buffer
 
 
 def parameter_names(kernel) -> list[str]:
@@ -250,8 +242,8 @@ def kernel_arguments(kernel, *, model: Model | None = None, spheres: Spheres | N
     - ``<field>_in``: ``state_in.<field>``;
     - ``<field>_out``: ``state_out.<field>`` when the state has that field, else
       ``outputs[name]`` (a dict or an object with that attribute: per-sphere counters, query
-      results), else ``launch_outputs[name]`` (outputs of the whole launch, never sliced: an
-      event buffer and its counter);
+      results), else ``launch_outputs[name]`` (outputs of the whole launch, never sliced: the
+      event buffer ``events_out``);
     - any other name: ``model.<name>``, else ``spheres.<name>``, else ``values[name]`` (plain
       per-launch values such as a frame count).
 
@@ -261,7 +253,7 @@ def kernel_arguments(kernel, *, model: Model | None = None, spheres: Spheres | N
             above.
         rows: a slice of the spheres: every per-sphere array (of ``spheres``, the states and
             ``outputs``) is passed as that slice (a view, no copy); a 2-D per-sphere output
-            (frames, N) is sliced along its second axis. The model is passed whole.
+            (frames, N) is sliced along its second axis. The model's structs are passed whole.
 
     Returns:
         The argument list in parameter order, for ``wp.launch(kernel, inputs=...)``.

@@ -16,6 +16,7 @@ from . import feasibility
 from . import validation as check
 from .device import resolve_device
 from .kernels import precision as fp
+from .kernels.data import Features
 from .kernels.frame_kernel import frame_kernel
 from .model import event_buffer, kernel_arguments, put_model, put_spheres, put_state
 from .scene import Scene
@@ -183,12 +184,12 @@ class Simulator:
         self.mass = swarm.mass.copy()
         """Sphere masses [kg], (N,), float64."""
         self._seconds = 0.0
-        # what the kernel is built for (the factory's cache key: always passed the same way)
-        self._features = {"precision_name": self.precision, "spin": self.spin,
-                          "energy_correction": self.energy_correction,
-                          "lossy": scene.energy_retention < 1.0,
-                          "broad_phase": self.broad_phase, "motion": self.motion}
-        self._kernel = frame_kernel(**self._features, events=False)
+        # what the kernel is built for (the factory's cache key)
+        self._features = Features(precision=self.precision, motion=self.motion,
+                                  broad_phase=self.broad_phase, spin=self.spin,
+                                  lossy=scene.energy_retention < 1.0,
+                                  energy_correction=self.energy_correction)
+        self._kernel = frame_kernel(self._features)
         self._upload(swarm)
         self._shards = _shards(self._n, self.workers)
         self._executor = None
@@ -230,11 +231,12 @@ class Simulator:
         self._initial_energy = energy
 
     def _arguments(self, kernel, rows: slice | None, values: dict, records: dict,
-                   events: dict) -> list:
+                   events) -> list:
         offset = 0 if rows is None else rows.start
         return kernel_arguments(kernel, model=self.model, spheres=self.spheres,
                                 state_in=self.state_0, state_out=self.state_1,
-                                outputs={**self.counters, **records}, launch_outputs=events,
+                                outputs={**self.counters, **records},
+                                launch_outputs={"events_out": events},
                                 values={**values, "sphere_offset": offset}, rows=rows)
 
     def _records(self, rows: int, motion: bool) -> dict:
@@ -262,7 +264,7 @@ class Simulator:
         start = time.perf_counter()
         wp.load_module(self._kernel.module, device=self.device)
         if check.flag("events", events):
-            kernel = frame_kernel(**self._features, events=True)
+            kernel = frame_kernel(self._features.but(events=True))
             wp.load_module(kernel.module, device=self.device)
         return time.perf_counter() - start
 
@@ -275,7 +277,7 @@ class Simulator:
         if records is None:
             records = self._no_records
         kernel = (self._kernel if events is None
-                  else frame_kernel(**self._features, events=True))
+                  else frame_kernel(self._features.but(events=True)))
         values = {"frame_count": int(frames), "record_every": int(every)}
         shards = self._shards if len(self._shards) > 1 else [None]
         buffers = events if events is not None else [self._no_events] * len(shards)
@@ -577,15 +579,16 @@ def _host(array: wp.array) -> np.ndarray:
     return pinned.numpy()
 
 
-def _read_events(buffer: dict, frame_base: int) -> tuple[dict, int]:
-    """The rows one launch wrote into an event buffer, as float64/int64 numpy columns (frames
-    made absolute), and the number of contacts the buffer had no room for."""
-    count = int(buffer["event_count_out"].numpy()[0])
-    capacity = buffer["event_index_out"].shape[0]
+def _read_events(buffer, frame_base: int) -> tuple[dict, int]:
+    """The rows one launch wrote into an event buffer (:func:`warpsim.model.event_buffer`), as
+    float64/int64 numpy columns (frames made absolute), and the number of contacts the buffer
+    had no room for."""
+    count = int(buffer.count.numpy()[0])
+    capacity = buffer.index.shape[0]
     rows = min(count, capacity)
-    index = buffer["event_index_out"].numpy()[:rows].astype(np.int64)
-    vector = buffer["event_vector_out"].numpy()[:rows].astype(np.float64)
-    scalar = buffer["event_scalar_out"].numpy()[:rows].astype(np.float64)
+    index = buffer.index.numpy()[:rows].astype(np.int64)
+    vector = buffer.vector.numpy()[:rows].astype(np.float64)
+    scalar = buffer.value.numpy()[:rows].astype(np.float64)
     columns = {"frame": index[:, 0] + frame_base, "sphere": index[:, 1], "box": index[:, 2],
                "kind": index[:, 3], "position": vector[:, 0], "normal": vector[:, 1],
                "fraction": scalar[:, 0], "normal_speed": scalar[:, 1]}

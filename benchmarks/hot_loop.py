@@ -1,0 +1,140 @@
+"""The frame kernel's cost at this commit against another one, side by side in one run.
+
+Run from the repository root: ``python -m benchmarks.hot_loop [--against REV] [--quick]
+[--repeats R] [--cases float32/linear,...] [--out PATH]``.
+
+A restructuring of the kernels (issue 16: scene data in structs, one candidate loop) must leave
+both the results and the hot loop's cost as they were. For each of float32/float64 and the
+linear/ballistic motion, the standard room (``warpsim.Scene.load("room")``, its emitter's swarm,
+``workers=1``, the broad phase ``auto`` picks) is advanced ``F`` frames by this checkout's
+package and by the package of git revision ``REV`` (exported with ``git archive`` into a
+temporary folder), each in its own process, the two taking turns ``R`` times. A process builds
+its kernels first (``Simulator.build``), runs one untimed warm-up launch and then takes the best
+of several timed ``sim.step(F)`` from the same start state. The time is the CPU time of the
+launching thread (``time.thread_time``: with ``workers=1`` the CPU launch runs in it), so the
+time a shared machine's other work holds the core is not counted; contention for caches still
+is, hence the best of many turns. The table gives the best ns per
+sphere-frame of each side, their ratio, and whether the final states are bit-identical (a
+SHA-256 of the state's bytes).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from .common import finish, parser, print_table, start
+
+#: The packages of a source tree and where each lives in it (as ``pyproject.toml`` maps them).
+PACKAGE_DIRS = {"warpsim": "warpsim", "warpsim/kernels": "kernels", "warpsim/export": "export",
+                "warpsim/scenes": "scenes"}
+
+CASES = [(prec, motion) for motion in ("linear", "ballistic") for prec in ("float32", "float64")]
+
+#: One process's measurement: prints one JSON line.
+CHILD = r"""
+import hashlib, json, sys, time
+import numpy as np
+import warp as wp
+wp.config.quiet = True
+import warpsim as ws
+prec, motion, n, frames, timings = sys.argv[1], sys.argv[2], *map(int, sys.argv[3:6])
+scene = ws.Scene.load("room")
+swarm = scene.spawn(n=n, seed=20240601)
+best = float("inf")
+for _ in range(timings):
+    sim = ws.Simulator(scene, swarm, precision=prec, motion=motion, workers=1, device="cpu")
+    sim.build()
+    sim.step(1)
+    wp.synchronize_device("cpu")
+    t0 = time.thread_time()
+    sim.step(frames)
+    wp.synchronize_device("cpu")
+    best = min(best, time.thread_time() - t0)
+s = sim.state()
+h = hashlib.sha256()
+for a in (s.position, s.velocity, s.angular_momentum, s.orientation, s.energy):
+    h.update(np.ascontiguousarray(a).tobytes())
+print(json.dumps({"seconds": best, "hash": h.hexdigest()[:16], "file": ws.__file__,
+                  "broad_phase": sim.broad_phase}))
+"""
+
+
+def export_tree(rev: str, root: Path) -> Path:
+    """The package of git revision ``rev`` laid out for import under ``root``."""
+    src = root / "src"
+    src.mkdir()
+    archive = subprocess.run(["git", "archive", rev, *set(PACKAGE_DIRS.values())],
+                             check=True, capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(src)], input=archive, check=True)
+    site = root / "site"
+    for package, folder in sorted(PACKAGE_DIRS.items()):  # "warpsim" first
+        shutil.copytree(src / folder, site / package)
+    return site
+
+
+def measure(site: Path | None, prec: str, motion: str, n: int, frames: int,
+            timings: int) -> dict:
+    """One process's best time; ``site`` None is this checkout's installed package."""
+    env = dict(os.environ)
+    if site is not None:
+        env["PYTHONPATH"] = str(site)
+    out = subprocess.run([sys.executable, "-c", CHILD, prec, motion, str(n), str(frames),
+                          str(timings)], check=True, capture_output=True, text=True, env=env,
+                         cwd=tempfile.gettempdir())
+    result = json.loads(out.stdout.strip().splitlines()[-1])
+    if site is not None and not result["file"].startswith(str(site)):
+        raise RuntimeError(f"the revision's process imported {result['file']}")
+    return result
+
+
+def main(argv=None) -> None:
+    p = parser("hot_loop", __doc__)
+    p.add_argument("--against", default="main", help="git revision to compare with (main)")
+    p.add_argument("--repeats", type=int, default=None, help="turns per side (default 5)")
+    p.add_argument("--cases", default=None,
+                   help="comma-separated PRECISION/MOTION pairs (default: all four)")
+    args = p.parse_args(argv)
+    cases = CASES if args.cases is None else [tuple(c.split("/")) for c in args.cases.split(",")]
+    started = time.perf_counter()
+    _, info, out = start("hot_loop", args)
+    n, frames = (5_000, 60) if args.quick else (20_000, 240)
+    repeats = args.repeats or (2 if args.quick else 5)
+    rev = subprocess.run(["git", "rev-parse", "--short", args.against], check=True,
+                         capture_output=True, text=True).stdout.strip()
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        site = export_tree(rev, Path(tmp))
+        for prec, motion in cases:
+            best = {"this": float("inf"), "base": float("inf")}
+            hashes = {}
+            for _ in range(repeats):
+                for side, where in (("base", site), ("this", None)):
+                    r = measure(where, prec, motion, n, frames, 3)
+                    best[side] = min(best[side], r["seconds"])
+                    hashes[side] = r["hash"]
+            ns = {k: v / (n * frames) * 1e9 for k, v in best.items()}
+            rows.append({"precision": prec, "motion": motion, "broad_phase": r["broad_phase"],
+                         "base_ns": ns["base"], "this_ns": ns["this"],
+                         "ratio": ns["this"] / ns["base"],
+                         "identical": "yes" if hashes["this"] == hashes["base"] else "NO",
+                         "base_s": best["base"], "this_s": best["this"]})
+            print(f"  {prec} {motion}: {ns['base']:.2f} -> {ns['this']:.2f} ns", flush=True)
+    print_table(f"Frame kernel, standard room, N = {n:,}, F = {frames}, one core, best of "
+                f"{repeats} x 3: {rev} against this checkout",
+                rows, [("precision", "precision", "s"), ("motion", "motion", "s"),
+                       ("broad phase", "broad_phase", "s"),
+                       (f"{rev} [ns]", "base_ns", ".2f"), ("this [ns]", "this_ns", ".2f"),
+                       ("ratio", "ratio", ".3f"), ("identical", "identical", "s")])
+    finish(out, {"machine": info, "against": rev, "spheres": n, "frames": frames,
+                 "repeats": repeats, "rows": rows}, started)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,273 @@
+"""The nearest hit over the candidate boxes, written once for every path and every broad phase.
+
+A sphere's path over one leg is a :func:`path_struct` ``Path``: its start, its bounds (the
+chord's midpoint, half extent and the growth per world axis that covers the sphere and, for an
+arc, the sagitta) and the no-hit value of the path parameter (``t = 1`` for a chord, ``s = tau``
+for an arc). Every per-box step is the same: the cheap conservative reject (:func:`apart`: the
+path's world bounding box and the box's, grown, apart along an axis), then the exact sweep in the
+box's frame, then keep the closer contact (ties: the lower box index). Only the exact sweep
+depends on the path, and :func:`candidate_funcs` captures it: ``nearest.chord_funcs`` and
+``nearest_arc.nearest_arc_funcs`` specialise the loops with the chord's or the arc's.
+
+The candidates come from every box (brute force), from the grid cell of the path's start (when
+the path's query box fits in the cell's margin) or from a BVH query (any order: hence the explicit
+tie rule). Each only skips boxes the reject would refuse anyway, so all of them give bit-identical
+results.
+"""
+
+from functools import cache
+from types import SimpleNamespace
+
+import warp as wp
+
+from .data import BROAD_PHASES, model_structs
+from .precision import Precision
+
+#: Relative slack on the bounding-box reject, so rounding in the bounds can never reject a box
+#: the segment touches (it only lets a few more boxes through to the exact test).
+REJECT_SLACK = 1.0e-3
+
+#: Relative pad on the BVH's bounds and queries, well above float32's ulp (1.2e-7): rounding in
+#: the per-box reject and in the float64 -> float32 bounds can never make the BVH drop a box the
+#: reject would let through.
+BOUNDS_PAD_REL = 1.0e-6
+
+#: Absolute pad [m] on the BVH queries, for coordinates at or near zero, where the relative pad
+#: vanishes (above float32's smallest subnormal, so the outward rounding still holds).
+BOUNDS_PAD_ABS = 1.0e-30
+
+
+@cache
+def path_struct(p: Precision):
+    """The ``Path`` struct of one precision: one leg of a sphere's motion, world frame."""
+    scalar, vec3 = p.scalar, p.vec3
+
+    @wp.struct
+    class Path:
+        """A chord ``a -> a + v`` (``g = 0``, ``tau = 1``) or an arc ``a + v s + 1/2 g s^2``,
+        ``s`` in ``[0, tau]``, of a sphere of radius ``r``."""
+
+        a: vec3
+        """Centre at the start [m]."""
+        v: vec3
+        """Chord: the displacement [m]; arc: the velocity at the start [m/s]."""
+        g: vec3
+        """Arc: the acceleration [m/s^2]; chord: 0."""
+        tau: scalar
+        """Arc: the time span [s]; chord: 1. The path parameter of "no hit"."""
+        r: scalar
+        """Sphere radius [m]."""
+        mid: vec3
+        """Midpoint of the chord [m]."""
+        half_d: vec3
+        """Half the chord's extent per world axis [m] (``|d| / 2``)."""
+        grow: vec3
+        """What the chord's bounding box grows by per world axis [m]: ``r`` (+ the sagitta)."""
+        end: vec3
+        """End of the path [m]."""
+
+    return Path
+
+
+@cache
+def path_funcs(p: Precision):
+    """``make_path(a, v, g, tau, r, d, grow) -> Path``: the path from ``a`` [m] along ``v``, ``g``
+    over ``[0, tau]`` whose chord is ``d`` [m] and whose bounds grow by ``grow`` [m] per axis."""
+    scalar, vec3 = p.scalar, p.vec3
+    Path = path_struct(p)
+    HALF = scalar(0.5)
+
+    @wp.func(inline=True)
+    def make_path(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, d: vec3, grow: vec3):
+        q = Path()
+        q.a = a
+        q.v = v
+        q.g = g
+        q.tau = tau
+        q.r = r
+        q.mid = a + HALF * d
+        q.half_d = vec3(HALF * wp.abs(d[0]), HALF * wp.abs(d[1]), HALF * wp.abs(d[2]))
+        q.grow = grow
+        q.end = a + d
+        return q
+
+    return make_path
+
+
+@cache
+def bounds_funcs(p: Precision) -> SimpleNamespace:
+    """The path bounds shared by every loop: the reject, the grid fit and the BVH query box.
+
+    Returns:
+        Namespace with ``apart``, ``grid_fits_path``, ``grid_fits`` and ``nearest_bvh_box``.
+    """
+    scalar, vec3 = p.scalar, p.vec3
+    Path = path_struct(p)
+    BroadPhase = model_structs(p).BroadPhase
+    SLACK = scalar(1.0 + REJECT_SLACK)
+    PAD_REL = scalar(BOUNDS_PAD_REL)
+    PAD_ABS = scalar(BOUNDS_PAD_ABS)
+
+    @wp.func(inline=True)
+    def apart(q: Path, center: vec3, extent: vec3):
+        """The reject: 1 when the path's bounds and the box's (``center +- extent``) are apart
+        along a world axis, both grown (``grow``, ``REJECT_SLACK``)."""
+        rel = q.mid - center
+        out = int(0)
+        for i in range(3):
+            if wp.abs(rel[i]) > (extent[i] + q.grow[i]) * SLACK + q.half_d[i]:
+                out = 1
+        return out
+
+    @wp.func
+    def grid_fits_path(a: vec3, b: vec3, grow: vec3, broad: BroadPhase):
+        """``(fits, cell)``: whether the box spanned by ``a`` and ``b``, grown by ``grow`` per
+        axis, lies in the grown cell of ``a``, and that cell's linear index (x fastest).
+
+        ``broad.margin`` is the margin the host listed the boxes for, less twice the rounding
+        pad of any coordinate inside the grid (``BOUNDS_PAD_REL`` of the grid's largest
+        coordinate), so no rounding here can accept a path the lists were not made for.
+        Whichever cell the rounded ``floor`` picks, the test is against that cell's own bounds.
+        """
+        fits = int(1)
+        index = int(0)
+        stride = int(1)
+        for i in range(3):
+            c = int(wp.floor((a[i] - broad.lower[i]) * broad.inv_cell[i]))
+            if c < 0 or c >= broad.dims[i]:
+                fits = 0
+            else:
+                cell_lo = broad.lower[i] + scalar(c) * broad.cell[i]
+                if (wp.min(a[i], b[i]) - grow[i] < cell_lo - broad.margin
+                        or wp.max(a[i], b[i]) + grow[i] > cell_lo + broad.cell[i] + broad.margin):
+                    fits = 0
+                index += c * stride
+                stride *= broad.dims[i]
+        return fits, index
+
+    @wp.func(inline=True)
+    def grid_fits(q: Path, broad: BroadPhase):
+        """:func:`grid_fits_path` for the path's query box (its chord's bounding box grown by
+        ``grow (1 + REJECT_SLACK)``): then only the cell's boxes can pass :func:`apart`."""
+        return grid_fits_path(q.a, q.end, q.grow * SLACK, broad)
+
+    @wp.func(inline=True)
+    def bvh_box(q: Path):
+        """The BVH query box of the path: the chord's bounding box grown by ``grow (1 +
+        REJECT_SLACK)`` and padded (``BOUNDS_PAD_*``), in float32 rounded outward, so every box
+        :func:`apart` lets through is a candidate."""
+        lower = wp.vec3f()
+        upper = wp.vec3f()
+        for i in range(3):
+            grow = q.grow[i] * SLACK
+            lo = wp.min(q.a[i], q.end[i]) - grow
+            hi = wp.max(q.a[i], q.end[i]) + grow
+            pad = PAD_REL * wp.max(wp.abs(lo), wp.abs(hi)) + PAD_ABS
+            lower[i] = wp.float32(lo - pad)
+            upper[i] = wp.float32(hi + pad)
+        return lower, upper
+
+    return SimpleNamespace(apart=apart, grid_fits_path=grid_fits_path, grid_fits=grid_fits,
+                           bvh_box=bvh_box)
+
+
+@cache
+def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
+    """The nearest-hit loops over candidate boxes, for one path kind and one broad phase.
+
+    Args:
+        p: precision.
+        exact: the exact sweep of one box, ``@wp.func exact(q: Path, center, rotation,
+            half_extents, box_radius) -> (hit, param, normal)`` with the normal in world
+            coordinates and ``param`` in ``[0, q.tau]`` (captured, so one source gives the
+            chord's and the arc's loops).
+        broad_phase: one of ``BROAD_PHASES``, compiled into ``nearest``: ``"brute"`` every box;
+            ``"bvh"`` the BVH query; ``"grid"`` the grid cell's list, every box as the fallback;
+            ``"grid-bvh"`` the grid, the BVH as the fallback. Bit-identical whichever.
+
+    Returns:
+        Namespace with ``candidate``, ``nearest_brute``, ``nearest_cell``, ``nearest_bvh`` and
+        ``nearest``; each loop returns ``(box, param, normal)``: ``box`` is -1 when nothing is
+        hit (then ``param = q.tau`` and the normal is 0).
+    """
+    if broad_phase not in BROAD_PHASES:
+        raise ValueError(f"broad_phase must be one of {BROAD_PHASES}, got {broad_phase!r}")
+    scalar, vec3 = p.scalar, p.vec3
+    Path = path_struct(p)
+    Boxes, BroadPhase, _, _ = model_structs(p)
+    bounds = bounds_funcs(p)
+    apart, grid_fits, bvh_box = bounds.apart, bounds.grid_fits, bounds.bvh_box
+    use_grid = broad_phase in ("grid", "grid-bvh")
+    fallback_bvh = broad_phase in ("bvh", "grid-bvh")
+    ZERO = scalar(0.0)
+
+    @wp.func(inline=True)
+    def candidate(q: Path, boxes: Boxes, k: int, best: int, best_t: scalar, best_n: vec3):
+        """Box ``k`` against the best so far: the reject, the exact sweep, and the closer of the
+        two contacts kept (ties: the lower box index)."""
+        center = boxes.center[k]
+        if apart(q, center, boxes.extent[k]) == 0:
+            hit, t, normal = exact(q, center, boxes.rotation[k], boxes.half_extents[k],
+                                   boxes.radius[k])
+            if hit == 1 and (best < 0 or t < best_t or (t == best_t and k < best)):
+                best = k
+                best_t = t
+                best_n = normal
+        return best, best_t, best_n
+
+    @wp.func(inline=True)
+    def nearest_brute(q: Path, boxes: Boxes):
+        """The first contact over every box."""
+        best = int(-1)
+        best_t = q.tau
+        best_n = vec3(ZERO, ZERO, ZERO)
+        for k in range(boxes.center.shape[0]):
+            best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
+        return best, best_t, best_n
+
+    @wp.func(inline=True)
+    def nearest_cell(q: Path, boxes: Boxes, broad: BroadPhase, cell: int):
+        """The first contact over the boxes grid cell ``cell`` lists."""
+        best = int(-1)
+        best_t = q.tau
+        best_n = vec3(ZERO, ZERO, ZERO)
+        for j in range(broad.cell_start[cell], broad.cell_start[cell + 1]):
+            best, best_t, best_n = candidate(q, boxes, broad.cell_boxes[j], best, best_t,
+                                             best_n)
+        return best, best_t, best_n
+
+    @wp.func(inline=True)
+    def nearest_bvh(q: Path, boxes: Boxes, broad: BroadPhase):
+        """The first contact over the boxes a query of the BVH returns (``broad.bvh = 0``, no
+        boxes: nothing is hit)."""
+        best = int(-1)
+        best_t = q.tau
+        best_n = vec3(ZERO, ZERO, ZERO)
+        if broad.bvh != wp.uint64(0):
+            lower, upper = bvh_box(q)
+            query = wp.bvh_query_aabb(broad.bvh, lower, upper)
+            k = int(0)
+            while wp.bvh_query_next(query, k):
+                best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
+        return best, best_t, best_n
+
+    @wp.func(inline=True)
+    def nearest(q: Path, boxes: Boxes, broad: BroadPhase):
+        """The first contact of the path over the boxes, by the broad phase compiled in."""
+        box = int(-1)
+        t = q.tau
+        normal = vec3(ZERO, ZERO, ZERO)
+        fits = int(0)
+        if wp.static(use_grid):
+            fits, cell = grid_fits(q, broad)
+            if fits == 1:
+                box, t, normal = nearest_cell(q, boxes, broad, cell)
+        if fits == 0:
+            if wp.static(fallback_bvh):
+                box, t, normal = nearest_bvh(q, boxes, broad)
+            else:
+                box, t, normal = nearest_brute(q, boxes)
+        return box, t, normal
+
+    return SimpleNamespace(candidate=candidate, nearest_brute=nearest_brute,
+                           nearest_cell=nearest_cell, nearest_bvh=nearest_bvh, nearest=nearest)

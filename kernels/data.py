@@ -1,0 +1,161 @@
+"""The scene's device data as Warp structs, and the features record every kernel is built for.
+
+A kernel takes the scene as three ``# Model`` structs, each passed whole from ``@wp.kernel`` to
+the ``@wp.func`` that reads it, so no parameter list is written out twice:
+
+- ``Boxes``: the obstacles, struct of arrays, world frame (``K`` boxes);
+- ``BroadPhase``: how a sphere finds its candidate boxes (the BVH and the uniform grid);
+- ``Physics``: the scene's constants;
+
+and, as an output of a whole launch, ``EventBuffer`` (one row per contact). The host fills
+them in ``warpsim.model`` (``put_model``, ``event_buffer``); :func:`model_structs` makes one
+set per precision.
+"""
+
+from dataclasses import dataclass, replace
+from functools import cache
+from typing import NamedTuple
+
+import warp as wp
+
+from .precision import Precision
+
+#: The broad phases a kernel can be built with (see ``candidates.candidate_funcs``).
+BROAD_PHASES = ("brute", "bvh", "grid", "grid-bvh")
+
+#: The motion models a kernel can be built with.
+MOTIONS = ("linear", "ballistic")
+
+PRECISIONS = ("float32", "float64")
+
+
+@dataclass(frozen=True)
+class Features:
+    """What a kernel variant is built for: the key of every kernel factory's cache.
+
+    A kernel contains the code of the features it is built with and no other (a scene without
+    spin runs a kernel without spin code).
+
+    Attributes:
+        precision: ``"float32"`` or ``"float64"``.
+        motion: ``"linear"`` (the chord per frame) or ``"ballistic"`` (the exact parabola).
+        broad_phase: one of ``BROAD_PHASES`` (bit-identical results whichever).
+        spin: friction torque on the angular momentum at contacts, and the orientation.
+        lossy: ``energy_retention < 1``: the loss at each bounce.
+        energy_correction: the frame kernel resets the speed from the energy after the move.
+        events: write every contact into the launch's event buffer.
+
+    ``motion`` and ``broad_phase`` may be any ``str`` (an enumeration of ``str`` included):
+    they compare and hash as their text.
+    """
+
+    precision: str = "float32"
+    motion: str = "linear"
+    broad_phase: str = "brute"
+    spin: bool = False
+    lossy: bool = False
+    energy_correction: bool = False
+    events: bool = False
+
+    def __post_init__(self):
+        for name, allowed in (("precision", PRECISIONS), ("motion", MOTIONS),
+                              ("broad_phase", BROAD_PHASES)):
+            value = getattr(self, name)
+            if not isinstance(value, str) or value not in allowed:
+                raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+        for name in ("spin", "lossy", "energy_correction", "events"):
+            object.__setattr__(self, name, bool(getattr(self, name)))
+
+    def but(self, **changes) -> "Features":
+        """This record with some fields changed."""
+        return replace(self, **changes)
+
+
+class ModelStructs(NamedTuple):
+    """The struct types of one precision (see :func:`model_structs`)."""
+
+    Boxes: type
+    BroadPhase: type
+    Physics: type
+    EventBuffer: type
+
+
+@cache
+def model_structs(p: Precision) -> ModelStructs:
+    """The device structs for one precision: ``Boxes, BroadPhase, Physics, EventBuffer``."""
+    scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
+
+    @wp.struct
+    class Boxes:
+        """The obstacles (``K`` rounded boxes), world frame."""
+
+        center: wp.array[vec3]
+        """Box centres [m], shape (K,)."""
+        rotation: wp.array[mat33]
+        """Local -> world rotation matrices, shape (K,)."""
+        half_extents: wp.array[vec3]
+        """Core half extents [m], local frame, shape (K,)."""
+        radius: wp.array[scalar]
+        """Rounding radii [m], shape (K,)."""
+        extent: wp.array[vec3]
+        """Half sizes of each rounded box's world-axis-aligned bounding box [m], shape (K,), for
+        the cheap per-box reject."""
+
+    @wp.struct
+    class BroadPhase:
+        """The candidate lookup: a BVH over the boxes' reject bounds and a uniform grid.
+
+        A kernel built without one of them never reads it (a single empty cell, a BVH id 0).
+        """
+
+        bvh: wp.uint64
+        """Id of a ``warp.Bvh`` over the reject bounds (float32, rounded outward); 0: none."""
+        lower: vec3
+        """The grid's lowest corner [m]."""
+        cell: vec3
+        """Cell size [m] per axis."""
+        inv_cell: vec3
+        """``1 / cell`` [1/m]."""
+        dims: wp.vec3i
+        """Cells per axis."""
+        margin: scalar
+        """The margin [m] a path may leave its cell by (``broad_phase.Grid.kernel_margin``)."""
+        cell_start: wp.array[wp.int32]
+        """CSR offsets into ``cell_boxes``, shape (cells + 1,); cell index x fastest."""
+        cell_boxes: wp.array[wp.int32]
+        """Box indices of each cell, ascending within a cell."""
+
+    @wp.struct
+    class Physics:
+        """The scene's constants."""
+
+        gravity: vec3
+        """[m/s^2], world frame."""
+        origin: vec3
+        """Reference point of the potential energy [m]."""
+        dt: scalar
+        """Frame duration [s]."""
+        friction: scalar
+        """``k_f`` [kg/s]."""
+        max_rot: scalar
+        """Clamp on ``|Rot|`` [rad/s]."""
+        retention: scalar
+        """Fraction of the kinetic energy kept at each bounce."""
+        max_bounces: int
+        """Cap on contacts per sphere per frame (a launch value, not compiled in)."""
+
+    @wp.struct
+    class EventBuffer:
+        """One row per contact of a launch (``C`` rows of room); rows past ``C`` are counted,
+        never written."""
+
+        count: wp.array[wp.int32]
+        """``count[0]``: contacts of the launch, written or not, shape (1,)."""
+        index: wp.array2d[wp.int32]
+        """``(frame within the launch from 1, sphere, box, resting)``, shape (C, 4)."""
+        vector: wp.array2d[vec3]
+        """``(contact centre [m], unit normal)``, shape (C, 2)."""
+        value: wp.array2d[scalar]
+        """``(fraction of the frame, normal speed before the contact [m/s])``, shape (C, 2)."""
+
+    return ModelStructs(Boxes, BroadPhase, Physics, EventBuffer)
