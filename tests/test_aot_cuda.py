@@ -1,0 +1,94 @@
+"""Every kernel factory compiles for NVIDIA GPUs ahead of time, without a GPU.
+
+Warp generates CUDA code for a module and NVRTC (shipped with Warp) compiles it to PTX for a
+chosen architecture (``wp.compile_aot_module(module, arch=..., use_ptx=True)``), so a kernel
+that would fail to build on a GPU fails here on the CPU-only machine first. Checked for sm_80
+(A100) and sm_90 (H100/H200):
+
+- in the suite (slow tier, a few minutes here): the frame kernel in both precisions and
+  motions with every optional feature on (the most code), and the collide and bounce kernels in
+  both precisions and motions with the grid-then-BVH broad phase and every feature on;
+- ``WARPSIM_AOT=factories``: each factory over precision x motion x broad phase, with every
+  feature on and, for the frame kernel, also with every one off;
+- ``WARPSIM_AOT=all``: the whole product of every flag of every factory (about 300 kernels).
+"""
+
+import itertools
+import os
+
+import pytest
+import warp as wp
+
+from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
+from warpsim.kernels.data import BROAD_PHASES, MOTIONS, PRECISIONS, Features
+from warpsim.kernels.frame_kernel import frame_kernel
+
+ARCHS = (80, 90)
+FLAGS = (False, True)
+ALL_ON = dict(spin=True, lossy=True, energy_correction=True, events=True)
+ALL_OFF = dict(spin=False, lossy=False, energy_correction=False, events=False)
+
+
+def sample():
+    """(label, kernel) of the sample the suite checks."""
+    out = []
+    for p, m in itertools.product(PRECISIONS, MOTIONS):
+        f = Features(precision=p, motion=m, broad_phase="grid-bvh")
+        out.append((f"frame/{p}/{m}/grid-bvh/all-on", frame_kernel(f.but(**ALL_ON))))
+        out.append((f"collide/{p}/{m}/grid-bvh", collide_kernel(f)))
+        out.append((f"bounce/{p}/{m}/grid-bvh/all-on",
+                    bounce_kernel(f.but(spin=True, lossy=True))))
+    return out
+
+
+def per_factory():
+    """(label, kernel) of every factory over precision x motion x broad phase."""
+    out = []
+    for p, m, b in itertools.product(PRECISIONS, MOTIONS, BROAD_PHASES):
+        f = Features(precision=p, motion=m, broad_phase=b)
+        out.append((f"collide/{p}/{m}/{b}", collide_kernel(f)))
+        out.append((f"bounce/{p}/{m}/{b}/all-on", bounce_kernel(f.but(spin=True, lossy=True))))
+        out.append((f"frame/{p}/{m}/{b}/all-on", frame_kernel(f.but(**ALL_ON))))
+        out.append((f"frame/{p}/{m}/{b}/all-off", frame_kernel(f.but(**ALL_OFF))))
+    return out
+
+
+def every_variant():
+    """(label, kernel) of the whole product of every flag of every factory."""
+    out = []
+    for p, m, b in itertools.product(PRECISIONS, MOTIONS, BROAD_PHASES):
+        f = Features(precision=p, motion=m, broad_phase=b)
+        out.append((f"collide/{p}/{m}/{b}", collide_kernel(f)))
+        for spin, lossy in itertools.product(FLAGS, FLAGS):
+            out.append((f"bounce/{p}/{m}/{b}/{spin}/{lossy}",
+                        bounce_kernel(f.but(spin=spin, lossy=lossy))))
+            for corr, events in itertools.product(FLAGS, FLAGS):
+                out.append((f"frame/{p}/{m}/{b}/{spin}/{lossy}/{corr}/{events}",
+                            frame_kernel(f.but(spin=spin, lossy=lossy, energy_correction=corr,
+                                               events=events))))
+    return out
+
+
+def compiles(kernel, arch, folder) -> None:
+    paths = wp.compile_aot_module(kernel.module, arch=arch, module_dir=folder, use_ptx=True)
+    assert paths and all(p.suffix == ".ptx" and p.stat().st_size > 0 for p in paths)
+    assert all(f"sm{arch}" in p.name for p in paths)
+
+
+CHOICES = {"sample": sample, "factories": per_factory, "all": every_variant}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("arch", ARCHS)
+def test_kernels_compile_for_the_gpu(arch, tmp_path):
+    choice = os.environ.get("WARPSIM_AOT", "sample")
+    if choice not in CHOICES:
+        pytest.fail(f"WARPSIM_AOT must be one of {sorted(CHOICES)}, got {choice!r}")
+    kernels = CHOICES[choice]()
+    failed = []
+    for label, kernel in kernels:
+        try:
+            compiles(kernel, arch, tmp_path)
+        except Exception as exc:  # noqa: BLE001 - collect every failing variant, then report
+            failed.append(f"{label}: {str(exc).splitlines()[0] if str(exc) else type(exc)}")
+    assert not failed, f"{len(failed)} of {len(kernels)} kernels failed for sm_{arch}: {failed}"
