@@ -440,7 +440,7 @@ class Simulator:
             buffers = [event_buffer(self._p, self.device, size) for size in sizes]
             base = self.frame
             self._launch(todo, every, records, buffers)
-            counts = [int(b["event_count_out"].numpy()[0]) for b in buffers]
+            counts = [int(b.count.numpy()[0]) for b in buffers]
             if room == 0 or all(c <= size for c, size in zip(counts, sizes, strict=True)):
                 break
             # overflow: undo the launch (the kernel never writes the state it reads)
