@@ -1,5 +1,7 @@
 """Studies behind BENCHMARKS.md: scripts run from the repository root, not part of the package.
 
+- ``python -m benchmarks.broad_walk [--quick]``: the walked grid against the other broad phases
+  and main's ``auto`` as spheres get faster (the standard room, thin walls, plates).
 - ``python -m benchmarks.sweep [--quick]``: the sweep kernel against ``warpsim.collide_boxes``
   and the NumPy baseline (:mod:`benchmarks.numpy_sweep`); brute force against the BVH.
 - ``python -m benchmarks.speed [--quick]``: the simulator's ns per sphere-frame in the standard

@@ -108,6 +108,24 @@ def parser(prog: str, doc: str) -> argparse.ArgumentParser:
     return p
 
 
+def open_study(name: str, doc: str, tables: tuple[str, ...], argv: list[str] | None):
+    """The start of a study with several tables: its options (:func:`parser` and ``--only``,
+    comma-separated among ``tables``; an unknown one or none is a usage error), then
+    :func:`start`. Returns ``(args, tables chosen, device, machine dict, out path, start
+    time)``."""
+    p = parser(f"python -m benchmarks.{name}", doc)
+    p.add_argument("--only", default=",".join(tables),
+                   help=f"comma-separated tables among {','.join(tables)} (default: all)")
+    args = p.parse_args(argv)
+    only = [t.strip() for t in args.only.split(",") if t.strip()]
+    unknown = sorted(set(only) - set(tables))
+    if unknown or not only:
+        p.error(f"--only takes tables among {','.join(tables)}, got {unknown or 'none'}")
+    started = time.perf_counter()
+    device, info, out = start(name, args)
+    return args, only, device, info, out, started
+
+
 def start(name: str, args: argparse.Namespace):
     """Initialise Warp and describe the run. Returns ``(device, machine dict, out path)``."""
     from warpsim.apps.startup import init_warp

@@ -34,10 +34,9 @@ from .common import (
     finish,
     identical_states,
     median_times,
-    parser,
+    open_study,
     print_table,
     room_swarm,
-    start,
 )
 
 SEED = 20240601
@@ -263,16 +262,7 @@ TABLES = ("room", "boxes", "workers")
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser("python -m benchmarks.speed", __doc__)
-    p.add_argument("--only", default=",".join(TABLES),
-                   help=f"comma-separated tables among {','.join(TABLES)} (default: all)")
-    args = p.parse_args(argv)
-    only = [t.strip() for t in args.only.split(",") if t.strip()]
-    unknown = sorted(set(only) - set(TABLES))
-    if unknown or not only:
-        p.error(f"--only takes tables among {','.join(TABLES)}, got {unknown or 'none'}")
-    started = time.perf_counter()
-    device, info, out = start("speed", args)
+    args, only, device, info, out, started = open_study("speed", __doc__, TABLES, argv)
     cfg = QUICK if args.quick else FULL
     results = {"machine": info, "quick": args.quick, "settings": cfg, "tables": only}
     if "room" in only:

@@ -10,9 +10,11 @@ depends on the path, and :func:`candidate_funcs` captures it: ``nearest.chord_fu
 ``nearest_arc.nearest_arc_funcs`` specialise the loops with the chord's or the arc's.
 
 The candidates come from every box (brute force), from the grid cell of the path's start (when
-the path's query box fits in the cell's margin) or from a BVH query (any order: hence the explicit
-tie rule). Each only skips boxes the reject would refuse anyway, so all of them give bit-identical
-results.
+the path's query box fits in the cell's margin), from the cells the path's chord crosses, walked
+in order (:func:`candidate_funcs`' ``nearest_walk``), or from a BVH query (any order: hence the
+explicit tie rule). Brute force, the cell and the BVH only skip boxes the reject would refuse
+anyway; the walk skips boxes the path cannot touch before the nearest hit it has found (see
+``nearest_walk``), so all of them give bit-identical results.
 """
 
 from functools import cache
@@ -20,7 +22,7 @@ from types import SimpleNamespace
 
 import warp as wp
 
-from .data import BROAD_PHASES, model_structs
+from .data import BROAD_PHASES, WALK_FLAG_BITS, model_structs
 from .precision import Precision
 
 #: Relative slack on the bounding-box reject, so rounding in the bounds can never reject a box
@@ -31,6 +33,18 @@ REJECT_SLACK = 1.0e-3
 #: the per-box reject and in the float64 -> float32 bounds can never make the BVH drop a box the
 #: reject would let through.
 BOUNDS_PAD_REL = 1.0e-6
+
+#: A walked chord moving less than this [m] along an axis counts as parallel to that axis's cell
+#: faces: its reciprocal stays finite in float32 (below 1e30), and so little motion never leaves
+#: the rounding pad of the walked grid's lists (``broad_phase.WALK_PAD_ULPS``).
+WALK_PARALLEL = 1.0e-30
+
+#: The walked grid's rounding pad [ulps of the kernels' float type, of the walk's scale
+#: (``BroadPhase.scale``)]: the lists grow every box's bounds by it besides the path's reach, and
+#: the walk's chord-against-bounds test by it too; far above the rounding of a chord's cell
+#: crossings, of the kernel's view of the cell faces, of that test and of a contact's position
+#: (a few ulps each), so no rounding can hide a box a contact is found on.
+WALK_PAD_ULPS = 64.0
 
 #: Absolute pad [m] on the BVH queries, for coordinates at or near zero, where the relative pad
 #: vanishes (above float32's smallest subnormal, so the outward rounding still holds).
@@ -183,12 +197,15 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
             chord's and the arc's loops).
         broad_phase: one of ``BROAD_PHASES``, compiled into ``nearest``: ``"brute"`` every box;
             ``"bvh"`` the BVH query; ``"grid"`` the grid cell's list, every box as the fallback;
-            ``"grid-bvh"`` the grid, the BVH as the fallback. Bit-identical whichever.
+            ``"grid-bvh"`` the grid, the BVH as the fallback; ``"walk"`` the cells the path
+            crosses, every box as the fallback (for a path :func:`walkable` refuses);
+            ``"walk-bvh"`` the walk, the BVH as the fallback. Bit-identical whichever.
 
     Returns:
-        Namespace with ``candidate``, ``nearest_brute``, ``nearest_cell``, ``nearest_bvh`` and
-        ``nearest``; each loop returns ``(box, param, normal)``: ``box`` is -1 when nothing is
-        hit (then ``param = q.tau`` and the normal is 0).
+        Namespace with ``candidate``, ``nearest_brute``, ``nearest_cell``, ``nearest_bvh``,
+        ``nearest_walk``, ``walkable`` and ``nearest``; each loop returns ``(box, param,
+        normal)``: ``box`` is -1 when nothing is hit (then ``param = q.tau`` and the normal
+        is 0).
     """
     if broad_phase not in BROAD_PHASES:
         raise ValueError(f"broad_phase must be one of {BROAD_PHASES}, got {broad_phase!r}")
@@ -198,8 +215,15 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
     bounds = bounds_funcs(p)
     apart, grid_fits, bvh_box = bounds.apart, bounds.grid_fits, bounds.bvh_box
     use_grid = broad_phase in ("grid", "grid-bvh")
-    fallback_bvh = broad_phase in ("bvh", "grid-bvh")
+    use_walk = broad_phase in ("walk", "walk-bvh")
+    fallback_bvh = broad_phase in ("bvh", "grid-bvh", "walk-bvh")
     ZERO = scalar(0.0)
+    ONE = scalar(1.0)
+    PAST_END = scalar(2.0)  # the crossing "parameter" of an axis the chord never crosses
+    PARALLEL = scalar(WALK_PARALLEL)
+    FLAG_BITS = WALK_FLAG_BITS
+    SLACK = scalar(1.0 + REJECT_SLACK)
+    PAD_ULPS = scalar(WALK_PAD_ULPS * p.eps)
 
     @wp.func(inline=True)
     def candidate(q: Path, boxes: Boxes, k: int, best: int, best_t: scalar, best_n: vec3):
@@ -252,6 +276,165 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
         return best, best_t, best_n
 
     @wp.func(inline=True)
+    def walkable(q: Path, broad: BroadPhase):
+        """1 when the walked grid's lists were made for the path: its growth (radius, sagitta)
+        within ``broad.reach`` and its ends within ``broad.scale`` of the origin on every axis
+        (the lists' rounding pad is sized for that scale); else the fallback answers it."""
+        ok = int(1)
+        for i in range(3):
+            if (q.grow[i] > broad.reach or wp.abs(q.a[i]) > broad.scale
+                    or wp.abs(q.end[i]) > broad.scale):
+                ok = 0
+        return ok
+
+    @wp.func(inline=True)
+    def crossing(lower: scalar, cell: scalar, a: scalar, inv_d: scalar, c: int, step: int):
+        """The chord's parameter where it leaves cell ``c`` along one axis, moving by ``step``
+        (+1, -1; 0: it does not move along it, ``PAST_END``): computed afresh from the cell's
+        face each time (grid ``lower`` [m], ``cell`` [m], start ``a`` [m], ``1 / d`` [1/m]), so
+        no rounding accumulates along a long walk."""
+        out = PAST_END
+        if step != 0:
+            face = c
+            if step > 0:
+                face = c + 1
+            out = (lower + scalar(face) * cell - a) * inv_d
+        return out
+
+    @wp.func(inline=True)
+    def advance(lower: scalar, cell: scalar, a: scalar, inv_d: scalar, c: int, step: int,
+                dims: int, axis: int):
+        """One step of the walk across a face of axis ``axis``: ``(c, t, fresh_bit, inside)``,
+        the new cell index along it, where the chord leaves that cell (:func:`crossing`), the
+        entry flag that marks a box fresh there (first along the axis, walking down: last) and
+        whether the cell is in the grid (``dims`` cells along the axis)."""
+        c = c + step
+        fresh_bit = int(1) << axis
+        if step < 0:
+            fresh_bit = int(1) << (axis + 3)
+        inside = int(1)
+        if c < 0 or c >= dims:
+            inside = 0
+        return c, crossing(lower, cell, a, inv_d, c, step), fresh_bit, inside
+
+    @wp.func(inline=True)
+    def crosses(q: Path, inv_d: vec3, center: vec3, extent: vec3, pad: scalar,
+                best_t: scalar):
+        """1 unless the chord misses the box's bounds (``center +- extent``) grown as the
+        reject grows them, and by ``pad`` [m], or enters them only past ``best_t``: the slab
+        test of the chord (``inv_d``: ``1 / d`` per axis, 0 on a parallel axis). A contact puts
+        the centre inside those bounds (on the chord, within the sagitta of the arc; the pad
+        holds the rounding), so a box it refuses cannot be hit before ``best_t``."""
+        lo = ZERO
+        hi = ONE
+        for i in range(3):
+            w = (extent[i] + q.grow[i]) * SLACK + pad
+            rel = center[i] - q.a[i]
+            if inv_d[i] == ZERO:
+                if wp.abs(rel) > w:
+                    hi = -ONE
+            else:
+                ta = (rel - w) * inv_d[i]
+                tb = (rel + w) * inv_d[i]
+                lo = wp.max(lo, wp.min(ta, tb))
+                hi = wp.min(hi, wp.max(ta, tb))
+        out = int(0)
+        if lo <= hi and lo * q.tau <= best_t:
+            out = 1
+        return out
+
+    @wp.func(inline=True)
+    def nearest_walk(q: Path, boxes: Boxes, broad: BroadPhase):
+        """The first contact over the boxes listed in the cells the path's chord crosses.
+
+        The chord ``q.a -> q.end`` is clipped to the grid and its cells are walked in order
+        (3D-DDA: each step crosses the nearest cell face, its parameter computed afresh from
+        the face). Each box is tried once per walk: in the first cell along the walk that lists
+        it. A cell lists a box when the box's reject bounds grown by ``broad.reach`` and the
+        rounding pad meet it, so the cells listing a box form an axis-aligned range; the walk's
+        cells are monotone along each axis, so a box listed in the cell just entered was listed
+        in an earlier one exactly when it is listed in the cell just left, i.e. unless the range
+        starts (or, walking down, ends) at the entered cell along the axis just crossed: the
+        entry's flags (``BroadPhase.cell_boxes``).
+
+        The walk stops at the first cell entered beyond the nearest hit found so far: a hit at
+        ``t`` puts the centre (on the chord, the arc within its sagitta of it) within ``reach``
+        of the box's bounds, in a cell entered at or before ``t``, which lists the box. Ties
+        keep the lower index (``candidate``), so the answer is brute force's, bit for bit. An
+        axis along which the chord moves less than ``WALK_PARALLEL`` [m] counts as parallel
+        (an explicit flag, no division by zero): so little motion stays inside the pad.
+
+        Contract: ``(box, param, normal)`` as ``nearest_brute``; -1, ``q.tau``, 0 without a
+        hit. Only for a path :func:`walkable` accepts.
+        """
+        best = int(-1)
+        best_t = q.tau
+        best_n = vec3(ZERO, ZERO, ZERO)
+        d = q.end - q.a
+        pad = PAD_ULPS * broad.scale
+        # the chord's part inside the grid, [f0, f1]; no box's lists reach outside it
+        f0 = ZERO
+        f1 = ONE
+        step = wp.vec3i(0, 0, 0)
+        inv_d = vec3(ZERO, ZERO, ZERO)
+        for i in range(3):
+            lo = broad.lower[i]
+            hi = lo + scalar(broad.dims[i]) * broad.cell[i]
+            if wp.abs(d[i]) < PARALLEL:
+                if q.a[i] < lo or q.a[i] > hi:
+                    f1 = -ONE
+            else:
+                inv_d[i] = ONE / d[i]
+                ta = (lo - q.a[i]) * inv_d[i]
+                tb = (hi - q.a[i]) * inv_d[i]
+                f0 = wp.max(f0, wp.min(ta, tb))
+                f1 = wp.min(f1, wp.max(ta, tb))
+                if d[i] > ZERO:
+                    step[i] = 1
+                else:
+                    step[i] = -1
+        if f0 <= f1:
+            # the walk in scalars (a vector indexed by a run-time axis goes through memory)
+            start = q.a + f0 * d
+            lo0, lo1, lo2 = broad.lower[0], broad.lower[1], broad.lower[2]
+            h0, h1, h2 = broad.cell[0], broad.cell[1], broad.cell[2]
+            n0, n1, n2 = broad.dims[0], broad.dims[1], broad.dims[2]
+            s0, s1, s2 = step[0], step[1], step[2]
+            i0, i1, i2 = inv_d[0], inv_d[1], inv_d[2]
+            c0 = wp.clamp(int(wp.floor((start[0] - lo0) * broad.inv_cell[0])), 0, n0 - 1)
+            c1 = wp.clamp(int(wp.floor((start[1] - lo1) * broad.inv_cell[1])), 0, n1 - 1)
+            c2 = wp.clamp(int(wp.floor((start[2] - lo2) * broad.inv_cell[2])), 0, n2 - 1)
+            t0 = crossing(lo0, h0, q.a[0], i0, c0, s0)
+            t1 = crossing(lo1, h1, q.a[1], i1, c1, s1)
+            t2 = crossing(lo2, h2, q.a[2], i2, c2, s2)
+            # a box is fresh in a cell unless it was listed in the cell just left too: its
+            # entry's flag of "first along the axis crossed" (walking down: "last") says so
+            fresh_bit = int(0)  # the first cell: every box
+            walking = int(1)
+            while walking == 1:
+                cell = c0 + n0 * (c1 + n1 * c2)
+                for j in range(broad.cell_start[cell], broad.cell_start[cell + 1]):
+                    entry = broad.cell_boxes[j]
+                    if fresh_bit == 0 or (entry & fresh_bit) != 0:
+                        # the chord against the box's bounds first, on the entry's own copy of
+                        # them (read in order, no indirection)
+                        if crosses(q, inv_d, broad.entry_bounds[2 * j],
+                                   broad.entry_bounds[2 * j + 1], pad, best_t) == 1:
+                            best, best_t, best_n = candidate(q, boxes, entry >> FLAG_BITS, best,
+                                                             best_t, best_n)
+                # the next cell: across the nearest face
+                enter = wp.min(wp.min(t0, t1), t2)
+                if enter > f1 or enter * q.tau > best_t:
+                    walking = 0
+                elif enter == t0:
+                    c0, t0, fresh_bit, walking = advance(lo0, h0, q.a[0], i0, c0, s0, n0, 0)
+                elif enter == t1:
+                    c1, t1, fresh_bit, walking = advance(lo1, h1, q.a[1], i1, c1, s1, n1, 1)
+                else:
+                    c2, t2, fresh_bit, walking = advance(lo2, h2, q.a[2], i2, c2, s2, n2, 2)
+        return best, best_t, best_n
+
+    @wp.func(inline=True)
     def nearest(q: Path, boxes: Boxes, broad: BroadPhase):
         """The first contact of the path over the boxes, by the broad phase compiled in."""
         box = int(-1)
@@ -262,6 +445,10 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
             fits, cell = grid_fits(q, broad)
             if fits == 1:
                 box, t, normal = nearest_cell(q, boxes, broad, cell)
+        if wp.static(use_walk):
+            fits = walkable(q, broad)
+            if fits == 1:
+                box, t, normal = nearest_walk(q, boxes, broad)
         if fits == 0:
             if wp.static(fallback_bvh):
                 box, t, normal = nearest_bvh(q, boxes, broad)
@@ -270,4 +457,5 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
         return box, t, normal
 
     return SimpleNamespace(candidate=candidate, nearest_brute=nearest_brute,
-                           nearest_cell=nearest_cell, nearest_bvh=nearest_bvh, nearest=nearest)
+                           nearest_cell=nearest_cell, nearest_bvh=nearest_bvh,
+                           nearest_walk=nearest_walk, walkable=walkable, nearest=nearest)

@@ -21,7 +21,11 @@ import warp as wp
 from .precision import Precision
 
 #: The broad phases a kernel can be built with (see ``candidates.candidate_funcs``).
-BROAD_PHASES = ("brute", "bvh", "grid", "grid-bvh")
+BROAD_PHASES = ("brute", "bvh", "grid", "grid-bvh", "walk", "walk-bvh")
+
+#: Low bits of a walked grid's ``cell_boxes`` entry that say where the box's range of cells
+#: starts and ends (``BroadPhase.cell_boxes``): 3 axes, first and last.
+WALK_FLAG_BITS = 6
 
 #: The motion models a kernel can be built with.
 MOTIONS = ("linear", "ballistic")
@@ -105,7 +109,11 @@ def model_structs(p: Precision) -> ModelStructs:
     class BroadPhase:
         """The candidate lookup: a BVH over the boxes' reject bounds and a uniform grid.
 
-        A kernel built without one of them never reads it (a single empty cell, a BVH id 0).
+        The grid is either the margin grid of ``"grid"`` (a path reads its start cell's list
+        when it stays within ``margin`` of that cell) or the walked grid of ``"walk"`` (a path
+        reads the lists of the cells its chord crosses, in order; ``reach``, ``scale`` and the
+        per-box cell ranges are its). A kernel built without one of them never reads it (a
+        single empty cell, a BVH id 0).
         """
 
         bvh: wp.uint64
@@ -123,7 +131,20 @@ def model_structs(p: Precision) -> ModelStructs:
         cell_start: wp.array[wp.int32]
         """CSR offsets into ``cell_boxes``, shape (cells + 1,); cell index x fastest."""
         cell_boxes: wp.array[wp.int32]
-        """Box indices of each cell, ascending within a cell."""
+        """Box indices of each cell, ascending within a cell. Walk: each entry is
+        ``box << WALK_FLAG_BITS | flags``: bit ``i`` set when the cell is the first along axis
+        ``i`` of the box's range of cells, bit ``3 + i`` when it is the last (``broad_phase.
+        WalkGrid.entries``)."""
+        reach: scalar
+        """Walk: the largest growth per axis [m] (sphere radius plus the arc's sagitta) of a
+        path the lists were made for (``broad_phase.WalkGrid.reach``)."""
+        scale: scalar
+        """Walk: the largest coordinate [m] (any axis) a walked path's ends may have; the lists'
+        rounding pad is sized for it."""
+        entry_bounds: wp.array[vec3]
+        """Walk: per entry ``j`` of ``cell_boxes``, its box's centre at ``2 j`` and world
+        bounding-box half size at ``2 j + 1`` [m] (``Boxes.center``, ``Boxes.extent``), so the
+        reject reads a cell's entries in order, shape (2 entries,)."""
 
     @wp.struct
     class Physics:

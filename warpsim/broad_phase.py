@@ -1,8 +1,7 @@
 """The broad phase: which boxes a sphere's frame path can reach, and the choice between methods.
 
-Three ways to find a sphere's candidate boxes, all bit-identical to trying every box (each only
-skips boxes that the per-box reject of ``kernels.candidates`` (``apart``) would refuse, and ties
-go to the lower index):
+Four ways to find a sphere's candidate boxes, all bit-identical to trying every box (ties go to
+the lower index, and each skips only boxes the path cannot hit before the first contact):
 
 - ``"brute"``: every box, in index order. Best for a handful of boxes.
 - ``"bvh"``: a query of a BVH over the boxes' reject bounds (Warp's ``wp.Bvh``). Best for many
@@ -12,10 +11,17 @@ go to the lower index):
   short list only; any other falls back to every box, or to the BVH (``"grid-bvh"``). Best when
   a frame's path is short against the scene: the standard room's spheres see one or two boxes
   instead of 22.
+- ``"walk"``: a uniform grid whose cells list the boxes within the spheres' radius (plus the
+  arc's sagitta) of the cell; a path reads the lists of the cells its chord crosses, in order
+  (3D-DDA), tries each box once, and stops at the first cell beyond the nearest contact found.
+  Its work follows the path's length in cells, not the speed's share of the scene: fast spheres
+  cost little more than slow ones. A path its lists were not made for (a sphere larger than
+  the lists' reach, ends far outside the grid) falls back to every box, or to the BVH
+  (``"walk-bvh"``).
 
 :func:`choose` turns ``broad_phase="auto"`` into one of them from a cost model measured on this
-package's kernels (see BENCHMARKS.md, "Simulator speed" and its table of cost against the
-number of boxes).
+package's kernels (see BENCHMARKS.md, "Simulator speed" and "The walked grid"): the cheapest of
+:func:`estimates`.
 """
 
 from __future__ import annotations
@@ -27,7 +33,8 @@ import numpy as np
 
 from . import validation as check
 from .device import BVH_MIN_BOXES, bvh_bounds
-from .kernels.candidates import BOUNDS_PAD_ABS, BOUNDS_PAD_REL
+from .kernels.candidates import BOUNDS_PAD_ABS, BOUNDS_PAD_REL, REJECT_SLACK, WALK_PAD_ULPS
+from .kernels.data import WALK_FLAG_BITS
 from .obstacles import RoundedBoxes
 
 #: The grid's margin is the reach of this share of the spheres' first frame (path length plus
@@ -61,9 +68,55 @@ GRID_FIXED = 4.0
 BVH_FIXED = 12.0
 BVH_PER_LEVEL = 3.0
 
+#: The walk's part of the cost model (same unit): ``WALK_FIXED`` per query (the clip to the grid
+#: and the first cell's faces), then per cell crossed ``WALK_PER_CELL`` (the step) plus its list
+#: (``WALK_PER_ENTRY`` an entry: the first cell's entries are tested, later ones mostly skipped
+#: as tried already, at a fraction of a test). Fitted on the CPU, float32, to the standard room
+#: at 5 and 60 m/s, thin-walls and 600 m/s among 256 plates, cell sizes 0.3 to 2.4 m
+#: (BENCHMARKS.md, "The walked grid"): a cell crossed costs about two rejects, so the model
+#: prefers cells a few times the mean path.
+WALK_FIXED = 4.0
+WALK_PER_CELL = 2.0
+WALK_PER_ENTRY = 0.5
+
+#: A walked path's ends may lie this many of the grid's spans from it (``WalkGrid.scale``);
+#: paths reaching farther fall back (their exact sweeps round on a larger scale than the pad).
+WALK_SPANS = 4.0
+
+#: Headroom on the walk's reach over the largest sphere radius plus sagitta, so that the kernel's
+#: own rounding of a path's growth never sends the largest sphere to the fallback.
+WALK_REACH_HEADROOM = 1.0e-3
+
+#: Most bytes the walked grid may take on the device (cell offsets 4 bytes a cell; an entry's
+#: box index 4 bytes and its box's bounds six floats): a cell size that needs more is not taken,
+#: and where none fits the walk is not built.
+MAX_WALK_BYTES = 1 << 26
+
+#: Cell sizes the walk's cost model tries: from the finest allowed on from the span per
+#: ``MAX_CELLS_PER_AXIS``, each this much larger than the last, up to one cell.
+WALK_CELL_RATIO = 1.25
+
+
+class CellLists:
+    """What both grids share: the cell geometry (``lower``, ``cell``, ``dims``) and the CSR cell
+    lists (``cell_start``, ``cell_boxes``), as dataclass fields of the grid."""
+
+    @property
+    def inv_cell(self) -> np.ndarray:
+        """``1 / cell`` [1/m], (3,), as the kernels multiply by it."""
+        return 1.0 / self.cell
+
+    @property
+    def cells(self) -> int:
+        return int(np.prod(self.dims))
+
+    def mean_list_length(self) -> float:
+        """Boxes listed per cell, averaged over the cells."""
+        return float(len(self.cell_boxes)) / max(self.cells, 1)
+
 
 @dataclass
-class Grid:
+class Grid(CellLists):
     """A uniform grid over the scene and its cell lists (host arrays, float64 geometry).
 
     Attributes:
@@ -88,18 +141,6 @@ class Grid:
     cell_start: np.ndarray
     cell_boxes: np.ndarray
 
-    @property
-    def inv_cell(self) -> np.ndarray:
-        """``1 / cell`` [1/m], (3,), as the kernels multiply by it."""
-        return 1.0 / self.cell
-
-    @property
-    def cells(self) -> int:
-        return int(np.prod(self.dims))
-
-    def mean_list_length(self) -> float:
-        """Boxes listed per cell, averaged over the cells."""
-        return float(len(self.cell_boxes)) / max(self.cells, 1)
 
 
 def reach(position: np.ndarray, velocity: np.ndarray, radius: np.ndarray, gravity, dt: float,
@@ -158,23 +199,191 @@ def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32) -> Grid | N
     kernel_margin = margin_k - 2.0 * (BOUNDS_PAD_REL * largest + BOUNDS_PAD_ABS)
     if not kernel_margin > 0.0:
         return None
+    start, box_ids = cell_lists(c_min, c_max, dims)
+    return Grid(lower=lower, cell=cell, dims=dims.astype(np.int32), margin=margin_k,
+                kernel_margin=float(np.asarray(kernel_margin, dtype=dtype)),
+                cell_start=start, cell_boxes=box_ids)
+
+
+def cell_lists(c_min: np.ndarray, c_max: np.ndarray, dims: np.ndarray,
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The CSR cell lists of boxes listed in the cell ranges ``c_min[b]`` to ``c_max[b]``
+    (inclusive, per axis, (K, 3) each) of a grid of ``dims`` cells.
+
+    Returns:
+        ``(cell_start, cell_boxes)``, int32: cell ``c`` (x fastest) lists
+        ``cell_boxes[cell_start[c]:cell_start[c + 1]]``, ascending.
+    """
+    counts = np.prod(c_max - c_min + 1, axis=1)
     cells_of = []
-    for b in range(k):
+    for b in range(len(c_min)):
         ix = np.arange(c_min[b, 0], c_max[b, 0] + 1)
         iy = np.arange(c_min[b, 1], c_max[b, 1] + 1)
         iz = np.arange(c_min[b, 2], c_max[b, 2] + 1)
         cz, cy, cx = np.meshgrid(iz, iy, ix, indexing="ij")
         cells_of.append((cx + dims[0] * (cy + dims[1] * cz)).ravel())
     cell_ids = np.concatenate(cells_of)
-    box_ids = np.repeat(np.arange(k, dtype=np.int64), counts)
+    box_ids = np.repeat(np.arange(len(c_min), dtype=np.int64), counts)
     order = np.lexsort((box_ids, cell_ids))  # by cell, then ascending box
     cell_ids, box_ids = cell_ids[order], box_ids[order]
     start = np.zeros(int(np.prod(dims)) + 1, dtype=np.int64)
     np.add.at(start, cell_ids + 1, 1)
-    start = np.cumsum(start)
-    return Grid(lower=lower, cell=cell, dims=dims.astype(np.int32), margin=margin_k,
-                kernel_margin=float(np.asarray(kernel_margin, dtype=dtype)),
-                cell_start=start.astype(np.int32), cell_boxes=box_ids.astype(np.int32))
+    return np.cumsum(start).astype(np.int32), box_ids.astype(np.int32)
+
+
+@dataclass
+class Paths:
+    """What the broad phases are sized for: a summary of the spheres' first frame.
+
+    Attributes:
+        margin: the margin grid's reach [m] (:func:`reach`).
+        reach: the walk's reach [m]: the largest sphere radius plus the sagitta of a frame's
+            arc (``|g| dt^2 / 8``), with ``WALK_REACH_HEADROOM``.
+        mean_path: the mean of ``|d_i|`` over the swarm per world axis [m], (3,): a frame's
+            chord (``(|v| + |g| dt) dt`` along the velocity), for the walk's cost.
+    """
+
+    margin: float
+    reach: float
+    mean_path: np.ndarray
+
+
+def paths(position: np.ndarray, velocity: np.ndarray, radius: np.ndarray, gravity, dt: float,
+          ) -> Paths:
+    """The :class:`Paths` of a swarm's first frame (``position`` (N, 3) [m], ``velocity``
+    (N, 3) [m/s], ``radius`` (N,) [m], ``gravity`` [m/s^2], ``dt`` [s])."""
+    g = np.asarray(gravity, dtype=np.float64)
+    if len(position) == 0:
+        return Paths(margin=0.0, reach=0.0, mean_path=np.zeros(3))
+    sagitta = float(np.max(np.abs(g))) * dt * dt / 8.0
+    step = np.abs(velocity) * dt + np.abs(g) * dt * dt
+    return Paths(margin=reach(position, velocity, radius, g, dt),
+                 reach=(float(np.max(radius)) + sagitta) * (1.0 + WALK_REACH_HEADROOM),
+                 mean_path=step.mean(axis=0))
+
+
+@dataclass
+class WalkGrid(CellLists):
+    """The walked grid and its cell lists (host arrays, float64 geometry): cell ``c`` lists the
+    boxes whose reject bounds, grown by ``reach (1 + REJECT_SLACK) + pad``, meet it.
+
+    Attributes:
+        lower, cell, dims: as :class:`Grid`'s.
+        reach: the largest growth per axis [m] (radius plus sagitta) of a path the lists are
+            made for, as the kernels hold it.
+        scale: the largest coordinate [m] a walked path's ends may have, as the kernels hold it.
+        pad: the rounding pad [m] the listed bounds carry (``WALK_PAD_ULPS`` of ``scale``).
+        cell_start, cell_boxes: the CSR lists, as :class:`Grid`'s.
+        box_cell_lo, box_cell_hi: the cell range listing each box, (K, 3) int32 each.
+        cost: the cost model's figure for one query (``WALK_*`` units).
+    """
+
+    lower: np.ndarray
+    cell: np.ndarray
+    dims: np.ndarray
+    reach: float
+    scale: float
+    pad: float
+    cell_start: np.ndarray
+    cell_boxes: np.ndarray
+    box_cell_lo: np.ndarray
+    box_cell_hi: np.ndarray
+    cost: float
+
+
+    def entries(self) -> np.ndarray:
+        """The kernels' ``cell_boxes``: each entry ``box << WALK_FLAG_BITS | flags``, bit ``i``
+        set where the entry's cell is the first of the box's range along axis ``i``, bit
+        ``3 + i`` where it is the last, int32."""
+        cell = np.repeat(np.arange(self.cells, dtype=np.int64), np.diff(self.cell_start))
+        index = np.stack([cell % self.dims[0], cell // self.dims[0] % self.dims[1],
+                          cell // (self.dims[0] * self.dims[1])], axis=1)
+        box = self.cell_boxes.astype(np.int64)
+        first = index == self.box_cell_lo[box]
+        last = index == self.box_cell_hi[box]
+        flags = (first * (1 << np.arange(3))).sum(axis=1) + (last * (8 << np.arange(3))).sum(1)
+        return ((box << WALK_FLAG_BITS) | flags).astype(np.int32)
+
+    def nbytes(self, float_bytes: int = 4) -> int:
+        """Bytes of the walked grid on the device: the cell offsets, the entries and each
+        entry's box bounds (at most ``MAX_WALK_BYTES``)."""
+        return int(self.cell_start.nbytes + self.cell_boxes.nbytes
+                   + len(self.cell_boxes) * 6 * float_bytes)
+
+
+def walk_cost(mean_path: np.ndarray, cell: np.ndarray, entries: int, cells: int) -> float:
+    """The cost model of one walked query: ``WALK_FIXED`` plus, per cell crossed (one, plus a
+    face per cell size along each axis of the mean path), ``WALK_PER_CELL`` and the mean list
+    (``entries / cells``) at ``WALK_PER_ENTRY``."""
+    crossed = 1.0 + float(np.sum(np.asarray(mean_path) / cell))
+    return WALK_FIXED + crossed * (WALK_PER_CELL + WALK_PER_ENTRY * entries / max(cells, 1))
+
+
+def build_walk_grid(boxes: RoundedBoxes, walk_reach: float, mean_path, dtype=np.float32,
+                    cell_size: float | None = None) -> WalkGrid | None:
+    """The walked grid over ``boxes`` for paths growing by up to ``walk_reach`` [m].
+
+    Args:
+        boxes: the obstacles.
+        walk_reach: the largest radius plus sagitta [m] of a path the lists are made for, >= 0.
+        mean_path: the mean ``|d_i|`` [m] of a query's chord per axis, (3,): the cost model's
+            path, which sets the cell size (the cheapest of cubic cells from the finest allowed
+            to one cell, by :func:`walk_cost`).
+        dtype: the kernels' float type.
+        cell_size: [m], > 0: this cell size instead of the cost model's (tests).
+
+    Returns:
+        The :class:`WalkGrid`, or None when the scene has no boxes or no cell size keeps the
+        grid within ``MAX_CELLS`` cells and ``MAX_WALK_BYTES``.
+    """
+    k = len(boxes)
+    if (k == 0 or k >= 1 << (31 - WALK_FLAG_BITS) or not walk_reach >= 0.0
+            or not math.isfinite(walk_reach)):
+        return None
+    eps = float(np.finfo(dtype).eps)
+    fbytes = np.dtype(dtype).itemsize
+    center = boxes.center.astype(dtype)
+    extent = boxes.world_extent().astype(dtype)
+    lo32, hi32 = bvh_bounds(center, extent)  # the reject bounds, rounded outward
+    reach_k = float(np.asarray(walk_reach, dtype=dtype))
+    grow = reach_k * (1.0 + REJECT_SLACK)
+    box_lo, box_hi = lo32.astype(np.float64) - grow, hi32.astype(np.float64) + grow
+    span = box_hi.max(axis=0) - box_lo.min(axis=0)
+    largest = float(np.max(np.abs(np.concatenate([box_lo, box_hi]))))
+    scale = float(np.asarray(largest + WALK_SPANS * float(span.max()), dtype=dtype))
+    pad = WALK_PAD_ULPS * eps * scale + BOUNDS_PAD_ABS
+    box_lo, box_hi = box_lo - pad, box_hi + pad
+    lower = box_lo.min(axis=0).astype(dtype).astype(np.float64)
+    span = box_hi.max(axis=0) - lower
+    if cell_size is not None:
+        sizes = [float(cell_size)]
+    else:
+        finest = float(span.max()) / MAX_CELLS_PER_AXIS
+        count = int(math.ceil(math.log(MAX_CELLS_PER_AXIS) / math.log(WALK_CELL_RATIO))) + 1
+        sizes = [finest * WALK_CELL_RATIO ** i for i in range(count)]
+    best = None
+    for size in sizes:
+        cell = np.full(3, np.asarray(size, dtype=dtype).astype(np.float64))
+        dims = np.maximum(1, np.ceil(span / cell)).astype(np.int64)
+        if np.prod(dims) > MAX_CELLS or np.any(dims > MAX_CELLS_PER_AXIS):
+            continue
+        # cell c's domain [lower + c h, lower + (c + 1) h] meets [box_lo, box_hi]
+        c_min = np.clip(np.ceil((box_lo - lower) / cell - 1.0).astype(np.int64), 0, dims - 1)
+        c_max = np.clip(np.floor((box_hi - lower) / cell).astype(np.int64), 0, dims - 1)
+        entries = int(np.prod(c_max - c_min + 1, axis=1).sum())
+        if 4 * (np.prod(dims) + 1) + entries * (4 + 6 * fbytes) > MAX_WALK_BYTES:
+            continue
+        cost = walk_cost(mean_path, cell, entries, int(np.prod(dims)))
+        if best is None or cost < best[0]:
+            best = (cost, cell, dims, c_min, c_max)
+    if best is None:
+        return None
+    cost, cell, dims, c_min, c_max = best
+    start, box_ids = cell_lists(c_min, c_max, dims)
+    return WalkGrid(lower=lower, cell=cell, dims=dims.astype(np.int32), reach=reach_k,
+                    scale=scale, pad=pad, cell_start=start, cell_boxes=box_ids,
+                    box_cell_lo=c_min.astype(np.int32), box_cell_hi=c_max.astype(np.int32),
+                    cost=cost)
 
 
 def exhaustive(box_count: int) -> tuple[str, float]:
@@ -185,18 +394,55 @@ def exhaustive(box_count: int) -> tuple[str, float]:
     return "brute", BRUTE_FIXED + box_count
 
 
-def choose(requested: str, boxes: RoundedBoxes, reach_m: float, dtype=np.float32,
-           ) -> tuple[str, Grid | None]:
+def estimates(boxes: RoundedBoxes, frame: Paths, dtype=np.float32) -> dict:
+    """Every broad phase the scene can run, with its cost by the model and its grid.
+
+    Returns:
+        ``{name: (cost, grid or None)}``: the exhaustive method (:func:`exhaustive`), and
+        ``"grid"``/``"grid-bvh"`` and ``"walk"``/``"walk-bvh"`` where their grids can be built
+        (a grid falls back to the exhaustive method).
+    """
+    k = len(boxes)
+    fallback, fallback_cost = exhaustive(k)
+    out = {fallback: (fallback_cost, None)}
+    if not k:
+        return out
+    suffix = "-bvh" if fallback == "bvh" else ""
+    grid = build_grid(boxes, frame.margin, dtype)
+    if grid is not None:
+        out["grid" + suffix] = (GRID_FIXED + grid.mean_list_length(), grid)
+    walk = build_walk_grid(boxes, frame.reach, frame.mean_path, dtype)
+    if walk is not None:
+        out["walk" + suffix] = (walk.cost, walk)
+    return out
+
+
+def preferred(options: dict) -> str:
+    """The broad phase ``auto`` takes among :func:`estimates`' ``options`` (the exhaustive method
+    first): the start-cell grid where the model puts it below the exhaustive method (where it
+    pays it was measured the cheapest of all: the standard room at 5 and 60 m/s), else the walk
+    where the model puts it below the exhaustive method, else that method."""
+    names = list(options)
+    floor = options[names[0]][0]
+    for prefix in ("grid", "walk"):
+        for name in names[1:]:
+            if name.startswith(prefix) and options[name][0] < floor:
+                return name
+    return names[0]
+
+
+def choose(requested: str, boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
+           ) -> tuple[str, Grid | WalkGrid | None]:
     """The broad phase to compile, and its grid when it has one.
 
     Args:
-        requested: ``"auto"``, ``"brute"``, ``"bvh"`` or ``"grid"``. A grid falls back to
-            :func:`exhaustive`'s method for the paths that leave their cell's margin (``"grid"``
-            over every box, ``"grid-bvh"`` over the BVH); ``"auto"`` takes the grid when the
-            cost model puts its mean cell list below the exhaustive method's cost, else that
-            method.
+        requested: ``"auto"``, ``"brute"``, ``"bvh"``, ``"grid"`` or ``"walk"``. A grid falls
+            back to :func:`exhaustive`'s method for the paths it was not made for (``"grid"``
+            and ``"walk"`` over every box, ``"grid-bvh"`` and ``"walk-bvh"`` over the BVH), and
+            where it cannot be built that method runs instead; ``"auto"`` takes
+            :func:`preferred` of :func:`estimates` by the cost model.
         boxes: the obstacles.
-        reach_m: how far a frame's path reaches [m] (see :func:`reach`).
+        frame: what the spheres' first frame needs (see :func:`paths`).
         dtype: the kernels' float type.
 
     Returns:
@@ -206,9 +452,16 @@ def choose(requested: str, boxes: RoundedBoxes, reach_m: float, dtype=np.float32
     if choice in ("brute", "bvh"):
         return choice, None
     k = len(boxes)
-    fallback, fallback_cost = exhaustive(k)
-    grid = build_grid(boxes, reach_m, dtype) if k else None
-    if grid is None or (choice == "auto"
-                        and GRID_FIXED + grid.mean_list_length() >= fallback_cost):
-        return fallback, None
-    return ("grid-bvh" if fallback == "bvh" else "grid"), grid
+    if choice in ("grid", "walk"):
+        grid = None
+        if k:
+            grid = (build_grid(boxes, frame.margin, dtype) if choice == "grid" else
+                    build_walk_grid(boxes, frame.reach, frame.mean_path, dtype))
+        if grid is None:
+            return exhaustive(k)[0], None
+        name = choice + ("-bvh" if exhaustive(k)[0] == "bvh" else "")
+    else:
+        options = estimates(boxes, frame, dtype)
+        name = preferred(options)
+        grid = options[name][1]
+    return name, grid

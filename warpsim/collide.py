@@ -68,7 +68,8 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
         device: Warp device (``"cpu"``, ``"cuda:0"``; None for Warp's default).
         precision: ``"float32"`` or ``"float64"`` kernels.
         broad_phase: how each sphere finds its candidate boxes (see
-            :mod:`warpsim.broad_phase`): ``"brute"``, ``"bvh"``, ``"grid"`` or ``"auto"``
+            :mod:`warpsim.broad_phase`): ``"brute"``, ``"bvh"``, ``"grid"``, ``"walk"`` or
+            ``"auto"``
             (built per call). The results are bit-identical; only the speed differs.
         motion: ``"linear"`` or ``"ballistic"``. For the ballistic motion ``t`` is the contact
             time as a fraction of ``dt``, ``position`` the centre on the parabola then,
@@ -89,7 +90,7 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
     motion, g = _motion_and_gravity(motion, gravity)
     p = precision_of(precision)
     dev = resolve_device(device)
-    method, grid = broad.choose(broad_phase, boxes, broad.reach(pos, vel, rad, g, dt),
+    method, grid = broad.choose(broad_phase, boxes, broad.paths(pos, vel, rad, g, dt),
                                 p.np_dtype)
     model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt, gravity=g)
     spheres = Spheres(radius=to_device(rad, p.scalar, p, dev), mass=None)
@@ -187,7 +188,8 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
         max_angular_speed: clamp on ``|L| / I`` [rad/s], > 0.
         energy_retention: kept fraction of kinetic energy per contact, in (0, 1].
         device: Warp device. precision: ``"float32"`` or ``"float64"``.
-        broad_phase: ``"auto"``, ``"bvh"``, ``"grid"`` or ``"brute"``, as in :func:`collide_boxes`
+        broad_phase: ``"auto"``, ``"bvh"``, ``"grid"``, ``"walk"`` or ``"brute"``, as in
+            :func:`collide_boxes`
             (bit-identical results).
         motion, gravity: as in :func:`collide_boxes`.
 
@@ -207,7 +209,7 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
     retention = settings["energy_retention"]
     p = precision_of(precision)
     dev = resolve_device(device)
-    method, grid = broad.choose(broad_phase, boxes, broad.reach(pos, vel, rad, g, dt),
+    method, grid = broad.choose(broad_phase, boxes, broad.paths(pos, vel, rad, g, dt),
                                 p.np_dtype)
     kernel = bounce_kernel(Features(precision=p.name, motion=motion, broad_phase=method,
                                     spin=friction > 0.0, lossy=retention < 1.0))

@@ -24,7 +24,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import warp as wp
 
-from .broad_phase import Grid
+from .broad_phase import Grid, WalkGrid
 from .device import bvh_bounds
 from .kernels.data import model_structs
 from .kernels.precision import Precision
@@ -111,7 +111,7 @@ def to_device(values: np.ndarray, dtype, p: Precision, device) -> wp.array:
 
 
 def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt: float,
-              grid: Grid | None = None, gravity=(0.0, 0.0, 0.0), origin=(0.0, 0.0, 0.0),
+              grid: Grid | WalkGrid | None = None, gravity=(0.0, 0.0, 0.0), origin=(0.0, 0.0, 0.0),
               friction: float = 0.0, max_angular_speed: float = 50.0,
               energy_retention: float = 1.0, max_bounces: int = 8) -> Model:
     """The obstacles and physics constants as a :class:`Model` on ``device``.
@@ -125,7 +125,8 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
         device: Warp device.
         broad_phase: the kernels' broad phase (``kernels.data.BROAD_PHASES``): ``"bvh"`` and
             ``"grid-bvh"`` build a BVH over the boxes (``box_bvh``; none without boxes).
-        grid: the grid of ``"grid"`` and ``"grid-bvh"`` (:func:`warpsim.broad_phase.choose`).
+        grid: the grid of ``"grid"`` and ``"grid-bvh"`` (a ``Grid``), or of ``"walk"`` and
+            ``"walk-bvh"`` (a ``WalkGrid``) (:func:`warpsim.broad_phase.choose`).
         dt: frame duration [s]. gravity: [m/s^2]. origin: potential reference point [m].
         friction: ``k_f`` [kg/s]. max_angular_speed: ``|Rot|`` clamp [rad/s].
         energy_retention: kept fraction of kinetic energy per contact.
@@ -135,10 +136,12 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
     structs = model_structs(p)
     center = boxes.center.astype(dtype)
     extent = boxes.world_extent().astype(dtype)
-    if broad_phase in ("grid", "grid-bvh") and grid is None:
-        raise ValueError(f"broad_phase {broad_phase!r} needs its grid")
+    kind = {"grid": Grid, "grid-bvh": Grid, "walk": WalkGrid, "walk-bvh": WalkGrid}.get(
+        broad_phase)
+    if kind is not None and not isinstance(grid, kind):
+        raise ValueError(f"broad_phase {broad_phase!r} needs its grid (a {kind.__name__})")
     tree = None
-    if broad_phase in ("bvh", "grid-bvh") and len(boxes):
+    if broad_phase in ("bvh", "grid-bvh", "walk-bvh") and len(boxes):
         lower, upper = bvh_bounds(center, extent)
         # SAH on every device: the best trees for queries, and its builder caps the depth at
         # the query stack's size (a static scene builds it once)
@@ -152,8 +155,12 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
                                          device=device)
     device_boxes.radius = wp.array(boxes.radius.astype(dtype), dtype=p.scalar, device=device)
     device_boxes.extent = wp.array(extent, dtype=p.vec3, device=device)
-    broad = _broad_phase(structs.BroadPhase(),
-                         grid if broad_phase in ("grid", "grid-bvh") else None, p, device)
+    broad = _broad_phase(structs.BroadPhase(), grid if kind is not None else None, p, device)
+    if isinstance(grid, WalkGrid) and len(grid.cell_boxes):
+        bounds = np.stack([center[grid.cell_boxes], extent[grid.cell_boxes]], axis=1)
+    else:
+        bounds = np.zeros((1, 2, 3), dtype)
+    broad.entry_bounds = wp.array(bounds.reshape(-1, 3), dtype=p.vec3, device=device)
     broad.bvh = wp.uint64(tree.id if tree is not None else 0)
     physics = structs.Physics()
     physics.gravity = p.vec3(*np.asarray(gravity, dtype=np.float64))
@@ -167,8 +174,12 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
                  bvh=tree)
 
 
-def _broad_phase(broad, grid: Grid | None, p: Precision, device):
-    """``broad`` (a ``BroadPhase``) with the grid's fields set (one empty cell without a grid)."""
+def _broad_phase(broad, grid: Grid | WalkGrid | None, p: Precision, device):
+    """``broad`` (a ``BroadPhase``) with the grid's fields set (one empty cell without a grid;
+    the walk's fields empty without a walked grid)."""
+    walk = grid if isinstance(grid, WalkGrid) else None
+    broad.reach = p.scalar(walk.reach if walk is not None else 0.0)
+    broad.scale = p.scalar(walk.scale if walk is not None else 0.0)
     if grid is None:
         broad.lower = p.vec3(0.0, 0.0, 0.0)
         broad.cell = p.vec3(1.0, 1.0, 1.0)
@@ -182,9 +193,10 @@ def _broad_phase(broad, grid: Grid | None, p: Precision, device):
     broad.cell = p.vec3(*grid.cell)
     broad.inv_cell = p.vec3(*grid.inv_cell)
     broad.dims = wp.vec3i(*(int(x) for x in grid.dims))
-    broad.margin = p.scalar(grid.kernel_margin)
+    broad.margin = p.scalar(grid.kernel_margin if walk is None else 0.0)
     broad.cell_start = wp.array(grid.cell_start, dtype=wp.int32, device=device)
-    broad.cell_boxes = wp.array(np.append(grid.cell_boxes, np.int32(0)), dtype=wp.int32,
+    entries = grid.entries() if walk is not None else grid.cell_boxes
+    broad.cell_boxes = wp.array(np.append(entries, np.int32(0)), dtype=wp.int32,
                                 device=device)
     return broad
 

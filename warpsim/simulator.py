@@ -60,9 +60,10 @@ class Stats:
         seconds: wall time spent in :meth:`Simulator.step` and :meth:`Simulator.run` [s].
         broad_phase: the broad phase that ran (:attr:`Simulator.broad_phase`): a requested
             ``"grid"`` reads ``"brute"`` or ``"bvh"`` where no grid fits (float64 far from the
-            origin, too many cells), ``"grid-bvh"`` where the grid falls back to the BVH.
+            origin, too many cells), ``"grid-bvh"`` where the grid falls back to the BVH; a
+            requested ``"walk"`` likewise (``"walk-bvh"``).
         requested_broad_phase: the one asked for (``"auto"``, ``"brute"``, ``"bvh"``,
-            ``"grid"``).
+            ``"grid"``, ``"walk"``).
     """
 
     frames: int
@@ -122,7 +123,8 @@ class Simulator:
             :mod:`warpsim.broad_phase`): ``"brute"`` tries every box, ``"bvh"`` queries a BVH
             over the boxes' bounds, ``"grid"`` reads the list of a uniform grid's cell when the
             frame's path stays near that cell (else every box, or the BVH for many boxes),
-            ``"auto"`` picks by a measured cost model. Bit-identical results;
+            ``"walk"`` reads the lists of the grid cells each path crosses, in order, up to its
+            first contact, ``"auto"`` picks by a measured cost model. Bit-identical results;
             :attr:`broad_phase` says which one runs.
         workers: on the CPU device, the swarm is split into this many contiguous shards, each
             launched from its own thread (Warp runs one CPU launch on one core and releases the
@@ -138,7 +140,8 @@ class Simulator:
 
     Attributes:
         broad_phase: the broad phase compiled into the kernel: ``"brute"``, ``"bvh"``,
-            ``"grid"`` or ``"grid-bvh"`` (a grid falling back to the BVH).
+            ``"grid"``, ``"grid-bvh"`` (a grid falling back to the BVH), ``"walk"`` or
+            ``"walk-bvh"``.
 
     Raises:
         ValueError: a bad argument, naming it.
@@ -168,11 +171,11 @@ class Simulator:
                                         self.max_bounces)
         """Texts of the :class:`warpsim.PrecisionWarning` s this set-up raised."""
         feasibility.check_outside(scene.boxes, swarm.position, swarm.radius, self.precision)
-        reach = broad.reach(swarm.position, swarm.velocity, swarm.radius, scene.gravity, self.dt)
+        frame = broad.paths(swarm.position, swarm.velocity, swarm.radius, scene.gravity, self.dt)
         dtype = fp.precision(self.precision).np_dtype
         self.requested_broad_phase = str(check.broad_phase(broad_phase))
         """The broad phase asked for; :attr:`broad_phase` is the one that runs."""
-        self.broad_phase, self._grid = broad.choose(broad_phase, scene.boxes, reach, dtype)
+        self.broad_phase, self._grid = broad.choose(broad_phase, scene.boxes, frame, dtype)
         self.device = resolve_device(device)
         self.workers = _workers(workers, self.device, len(swarm))
         """Threads that launch the frame kernel, each on a contiguous shard of the swarm."""

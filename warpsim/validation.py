@@ -389,8 +389,8 @@ def optional_flag(name: str, value) -> bool | None:
 
 
 def broad_phase(value) -> BroadPhase:
-    """A :class:`~warpsim.vocabulary.BroadPhase`: ``"auto"``, ``"brute"``, ``"bvh"`` or
-    ``"grid"`` (booleans and other types refused)."""
+    """A :class:`~warpsim.vocabulary.BroadPhase`: ``"auto"``, ``"brute"``, ``"bvh"``,
+    ``"grid"`` or ``"walk"`` (booleans and other types refused)."""
     return _member(BroadPhase, "broad_phase", value)
 
 

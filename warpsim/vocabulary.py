@@ -30,7 +30,11 @@ class BroadPhase(StrEnum):
     BVH = "bvh"
     """A bounding-volume hierarchy of the boxes."""
     GRID = "grid"
-    """A uniform grid of the boxes (falling back to the BVH or every box for fast spheres)."""
+    """A uniform grid of the boxes: the start cell's list, for paths that stay near their cell
+    (falling back to the BVH or every box for the others)."""
+    WALK = "walk"
+    """A uniform grid walked along each path: the lists of the cells the path crosses, in
+    order, up to the first contact (its cost follows the path, not the speed)."""
 
 
 class ContactKind(IntEnum):

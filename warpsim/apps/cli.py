@@ -487,6 +487,8 @@ def describe_broad_phase(ran: str, requested: str) -> str:
         return f"{ran}" + (" (chosen by the cost model)" if requested == BroadPhase.AUTO else "")
     if requested == BroadPhase.GRID and ran == "grid-bvh":
         return "grid, falling back to the BVH for paths that leave their cell"
+    if requested == BroadPhase.WALK and ran == "walk-bvh":
+        return "walk, falling back to the BVH for paths its lists were not made for"
     return (f"{ran} ({requested} asked: no grid fits this scene at this precision, "
             f"so every sphere uses the {ran})")
 
