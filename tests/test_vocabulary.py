@@ -11,7 +11,7 @@ from warpsim.apps.cli import build_parser as cli_parser
 
 def test_members_are_their_strings():
     assert ws.Motion.LINEAR == "linear" and ws.Motion("ballistic") is ws.Motion.BALLISTIC
-    assert [m.value for m in ws.BroadPhase] == ["auto", "brute", "bvh", "grid"]
+    assert [m.value for m in ws.BroadPhase] == ["auto", "brute", "bvh", "grid", "walk"]
     assert f"{ws.BroadPhase.GRID}" == "grid" and str(ws.Motion.LINEAR) == "linear"
     assert check.broad_phase("bvh") is ws.BroadPhase.BVH
     assert check.motion(ws.Motion.BALLISTIC) is ws.Motion.BALLISTIC
@@ -21,7 +21,7 @@ def test_members_are_their_strings():
 @pytest.mark.parametrize("value", [True, False, 1, None, "BVH", "octree", b"bvh"])
 def test_anything_else_is_refused_as_a_broad_phase(value):
     with pytest.raises(ValueError, match=r"^broad_phase must be one of \('auto', 'brute', "
-                                         r"'bvh', 'grid'\), got "):
+                                         r"'bvh', 'grid', 'walk'\), got "):
         check.broad_phase(value)
 
 
