@@ -245,3 +245,13 @@ def test_auto_walks_fast_spheres_among_many_plates():
     room = ws.Scene.load("room")
     slow = broad.Paths(margin=0.2, reach=0.05, mean_path=np.full(3, 0.04))
     assert broad.choose("auto", room.boxes, slow)[0] == "grid"
+
+
+def test_the_run_footprint_bounds_the_broad_phase():
+    """What ``--max-memory`` is checked against holds the largest grid either broad phase
+    may build."""
+    from warpsim import footprint
+
+    margin_grid = 4 * (broad.MAX_CELLS + 1) + 4 * broad.MAX_ENTRIES
+    assert max(margin_grid, broad.MAX_WALK_BYTES) <= footprint.BROAD_PHASE_BYTES
+    assert footprint.run_bytes(10, 2).broad == footprint.BROAD_PHASE_BYTES

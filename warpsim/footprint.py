@@ -1,7 +1,7 @@
 """What a run will hold in memory, estimated before anything is drawn or allocated.
 
 A run holds the swarm (its draw included), the device state, the frames it keeps on the host,
-the launch's frame buffers and the contact buffers. :func:`run_bytes` adds them up from the
+the launch's frame buffers, the contact buffers and the broad phase's lists (bounded). :func:`run_bytes` adds them up from the
 sizes alone, so that ``warpsim run`` refuses a run that cannot fit in one line, before the
 spheres are drawn, instead of dying of a ``MemoryError`` (or being killed) later.
 """
@@ -29,6 +29,10 @@ EVENT_DEVICE_FIXED = 16
 EVENT_HOST_BYTES = 3 * 100
 """Host bytes of one contact row: read out as float64/int64 columns (about 100 B), the table's
 columns, and a copy while it is sorted."""
+BROAD_PHASE_BYTES = 1 << 27
+"""Upper bound of the broad phase's device lists (128 MiB): the start-cell grid's at most
+``broad_phase.MAX_CELLS`` offsets and ``MAX_ENTRIES`` entries (72 MiB), the walked grid's at most
+``broad_phase.MAX_WALK_BYTES`` (64 MiB); a grid that would need more is not built."""
 DEFAULT_MEMORY_FRACTION = 0.8
 """Fraction of the machine's memory a run may plan to hold by default."""
 
@@ -42,15 +46,17 @@ class Footprint:
     trajectory: int
     launch: int
     events: int
+    broad: int = BROAD_PHASE_BYTES
 
     @property
     def total(self) -> int:
-        return self.swarm + self.device + self.trajectory + self.launch + self.events
+        return (self.swarm + self.device + self.trajectory + self.launch + self.events
+                + self.broad)
 
     def describe(self) -> str:
         parts = [("swarm", self.swarm), ("device state", self.device),
                  ("recorded frames", self.trajectory), ("launch buffers", self.launch),
-                 ("events", self.events)]
+                 ("events", self.events), ("broad phase", self.broad)]
         return ", ".join(f"{name} {value / 1e9:.2f} GB" for name, value in parts if value)
 
 

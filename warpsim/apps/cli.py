@@ -256,7 +256,7 @@ def check_memory(args, n: int, kept: int, records: int, every: int, frames: int,
                                event_rows=event_rows)
     size = footprint.Footprint(swarm=size.swarm, device=size.device,
                                trajectory=size.trajectory + int(usd_bytes), launch=size.launch,
-                               events=size.events)
+                               events=size.events, broad=size.broad)
     limit = (footprint.default_limit() if args.max_memory is None
              else check.scalar("max_memory", args.max_memory, positive=True))
     footprint.check_fits(size, limit, "--max-memory",
