@@ -1,9 +1,10 @@
 """What a run will hold in memory, estimated before anything is drawn or allocated.
 
 A run holds the swarm (its draw included), the device state, the frames it keeps on the host,
-the launch's frame buffers, the contact buffers and the broad phase's lists (bounded). :func:`run_bytes` adds them up from the
-sizes alone, so that ``warpsim run`` refuses a run that cannot fit in one line, before the
-spheres are drawn, instead of dying of a ``MemoryError`` (or being killed) later.
+the launch's frame buffers, the contact buffers and the broad phase's lists (bounded).
+:func:`run_bytes` adds them up from the sizes alone, so that ``warpsim run`` refuses a run that
+cannot fit in one line, before the spheres are drawn, instead of dying of a ``MemoryError`` (or
+being killed) later.
 """
 
 from __future__ import annotations
