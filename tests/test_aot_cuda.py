@@ -38,6 +38,8 @@ def sample():
         out.append((f"collide/{p}/{m}/grid-bvh", collide_kernel(f)))
         out.append((f"bounce/{p}/{m}/grid-bvh/all-on",
                     bounce_kernel(f.but(spin=True, lossy=True))))
+        walk = f.but(broad_phase="walk-bvh", **ALL_ON)
+        out.append((f"frame/{p}/{m}/walk-bvh/all-on", frame_kernel(walk)))
     return out
 
 
