@@ -350,6 +350,29 @@ def index_list(name: str, value: Sequence[int] | np.ndarray, count: int) -> np.n
     return arr
 
 
+def frame_array(name: str, value, count: int) -> np.ndarray:
+    """Frame numbers: an integer broadcast to ``(count,)``, or ``(count,)`` integers, each in
+    ``[0, 2**31)``, as int64 (floats, even ``2.0``, and booleans refused)."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iu":
+        got = _short(value) if arr.ndim == 0 else f"an array of {arr.dtype}"
+        raise ValueError(f"{name} must be integers, got {got}")
+    if arr.ndim == 0:
+        arr = np.full(count, int(arr), dtype=np.int64)
+        label = name
+    elif arr.shape == (count,):
+        arr = arr.astype(np.int64)
+        label = None
+    else:
+        raise ValueError(f"{name} must be an integer or have shape ({count},), got {arr.shape}")
+    for bad, what in ((arr < 0, "must be >= 0"), (arr >= INT_LIMIT, "must be below 2**31")):
+        if bad.any():
+            i = first_bad_row(bad)
+            where = label if label is not None else f"{name}[{i}]"
+            raise ValueError(f"{where} {what}, got {arr[i]}")
+    return arr
+
+
 def frozen(arr: np.ndarray) -> np.ndarray:
     """Mark an owned array read-only, so validated data cannot drift after the check."""
     arr.setflags(write=False)

@@ -1,0 +1,137 @@
+"""Spheres born over time: before its birth a sphere does not exist; after it, it moves bit for
+bit as the only sphere of a run started at its birth with the same state.
+
+The independent computation is that run itself: each sphere simulated alone from frame 0 (a
+kernel without the births feature), its frame ``k`` compared with frame ``b + k`` of the run
+with births, bit for bit, its contacts with their frames shifted by ``b``.
+"""
+
+import numpy as np
+import pytest
+
+import warpsim as ws
+from warpsim import simulator as simulator_module
+
+FRAMES = 120
+BIRTHS = np.array([0, 7, 0, 30, 55, 80, 119, 200])
+"""Birth frames: at the start, mid-run, on the last frame (born, never moved) and after the run
+(never appears)."""
+
+
+def spin_swarm(births=BIRTHS) -> tuple[ws.Scene, ws.Swarm]:
+    """Spheres thrown down the spin scene's ramp (friction spins them), born at ``births``."""
+    scene = ws.Scene.load("spin")
+    drawn = scene.spawn(n=len(births), seed=3)
+    swarm = ws.Swarm(drawn.position, drawn.velocity, drawn.radius, drawn.mass,
+                     birth_frame=births)
+    return scene, swarm
+
+
+def alone(swarm: ws.Swarm, i: int) -> ws.Swarm:
+    """Sphere ``i`` of ``swarm`` as a swarm of its own, born at frame 0."""
+    return ws.Swarm(swarm.position[[i]], swarm.velocity[[i]], swarm.radius[[i]],
+                    swarm.mass[[i]], angular_momentum=swarm.angular_momentum[[i]],
+                    orientation=swarm.orientation[[i]])
+
+
+def events_of(table, sphere: int, shift: int) -> dict:
+    """The contacts of one sphere, frames shifted back by ``shift``, as comparable columns."""
+    rows = table.of_sphere(sphere)
+    return {"frame": rows.frame - shift, "fraction": rows.fraction, "box": rows.box,
+            "kind": rows.kind, "position": rows.position, "normal": rows.normal,
+            "normal_speed": rows.normal_speed}
+
+
+def check_against_alone(scene, swarm, traj, sim, every, **kw):
+    """Every sphere of ``traj`` (a run with births) against its own run from its birth."""
+    frames = int(traj.frame[-1])
+    expected_bounces = 0
+    lived = 0
+    for i, b in enumerate(swarm.birth_frame):
+        unborn = traj.frame < b
+        assert np.isnan(traj.position[unborn, i]).all()
+        assert np.isnan(traj.orientation[unborn, i]).all()
+        if b > frames:
+            assert len(traj.events.of_sphere(i)) == 0
+            continue
+        ref = ws.Simulator(scene, alone(swarm, i), workers=1, **kw)
+        assert not ref._features.births
+        rows = np.flatnonzero(traj.frame >= b)
+        if b < frames:
+            want = ref.run(frames - int(b), every=1, velocities=True, events=True)
+            at = traj.frame[rows] - b  # the alone run's record of each of those frames
+            for name in ("position", "orientation", "velocity", "angular_velocity"):
+                got = getattr(traj, name)[rows, i]
+                assert np.array_equal(got, getattr(want, name)[at, 0]), (name, i, b)
+            got_events, want_events = events_of(traj.events, i, b), events_of(want.events, 0, 0)
+            for name, values in want_events.items():
+                assert np.array_equal(got_events[name], values), (name, i, b)
+            expected_bounces += ref.stats.bounces
+            lived += frames - int(b)
+        else:  # born on the last frame: recorded at its birth state, never moved
+            assert np.array_equal(traj.position[rows, i],
+                                  swarm.position[[i]].astype(traj.position.dtype))
+    assert sim.stats.bounces == expected_bounces
+    assert sim.stats.sphere_frames == lived
+    assert traj.birth_frame.tolist() == swarm.birth_frame.tolist()
+    assert traj.alive().tolist() == (traj.frame[:, None] >= swarm.birth_frame[None]).tolist()
+
+
+@pytest.mark.parametrize("motion", ["linear", "ballistic"])
+def test_born_sphere_moves_as_a_run_started_at_its_birth(precision, motion):
+    scene, swarm = spin_swarm()
+    kw = dict(precision=precision, motion=motion, device="cpu")
+    sim = ws.Simulator(scene, swarm, workers=1, **kw)
+    assert sim.spin and sim._features.births
+    traj = sim.run(FRAMES, every=1, velocities=True, events=True)
+    assert traj.events.frame.size > 0 and np.nanmax(np.abs(traj.angular_velocity[-1])) > 0
+    check_against_alone(scene, swarm, traj, sim, 1, **kw)
+
+
+def test_births_across_launches_threads_and_every(monkeypatch, precision):
+    """Launch chunks that start before, at and after births, two threads, and a recording
+    stride change no bit of a run with births."""
+    scene, swarm = spin_swarm()
+    kw = dict(precision=precision, device="cpu")
+    whole = ws.Simulator(scene, swarm, workers=1, **kw)
+    ref = whole.run(FRAMES, every=1, velocities=True, events=True)
+    monkeypatch.setattr(simulator_module, "LAUNCH_SPHERE_FRAMES", len(BIRTHS) * 4)
+    sim = ws.Simulator(scene, swarm, workers=2, **kw)
+    assert sim.workers == 2
+    first = sim.run(33, every=3, velocities=True, events=True)
+    sim.step(17)
+    rest = sim.run(FRAMES - 50, every=3, velocities=True, events=True)
+    for part in (first, rest):
+        rows = np.searchsorted(ref.frame, part.frame)
+        for name in ("position", "orientation", "velocity"):
+            assert np.array_equal(getattr(part, name), getattr(ref, name)[rows],
+                                  equal_nan=True), name
+        # a run's first angular velocity is the host's (float64, rounded), the others the
+        # kernel's: compare the kernel's
+        assert np.array_equal(part.angular_velocity[1:], ref.angular_velocity[rows[1:]],
+                              equal_nan=True)
+        inside = (ref.events.frame > part.frame[0]) & (ref.events.frame <= part.frame[-1])
+        want = ref.events.select(np.flatnonzero(inside))
+        for name in ("frame", "sphere", "box", "kind", "fraction", "position", "normal",
+                     "normal_speed"):
+            assert np.array_equal(getattr(part.events, name), getattr(want, name)), name
+    assert sim.stats.bounces == whole.stats.bounces
+    assert sim.stats.sphere_frames == whole.stats.sphere_frames
+
+
+def test_all_born_at_zero_builds_no_births_code():
+    scene, swarm = spin_swarm(np.zeros(3, dtype=np.int64))
+    assert not swarm.has_births
+    assert not ws.Simulator(scene, swarm, device="cpu")._features.births
+
+
+@pytest.mark.parametrize("value,message", [
+    ([0, -1, 2], r"birth_frame\[1\] must be >= 0, got -1"),
+    ([0, 1.0, 2], "birth_frame must be integers"),
+    ([0, 1], r"birth_frame must be an integer or have shape \(3,\)"),
+    (True, "birth_frame must be integers"),
+    ([0, 2**31, 0], r"birth_frame\[1\] must be below 2\*\*31"),
+])
+def test_bad_birth_frames_are_refused_naming_the_index(value, message):
+    with pytest.raises(ValueError, match=message):
+        ws.Swarm(np.zeros((3, 3)), np.zeros((3, 3)), birth_frame=value)
