@@ -135,3 +135,38 @@ def test_all_born_at_zero_builds_no_births_code():
 def test_bad_birth_frames_are_refused_naming_the_index(value, message):
     with pytest.raises(ValueError, match=message):
         ws.Swarm(np.zeros((3, 3)), np.zeros((3, 3)), birth_frame=value)
+
+
+@pytest.mark.parametrize("fmt", ["usda", "usdc"])
+def test_usd_hides_the_unborn_and_reads_them_back_as_nan(tmp_path, fmt):
+    pytest.importorskip("pxr")
+    from pxr import Usd, UsdGeom
+    from test_export import compliance_errors
+
+    from warpsim.export import read_usd, write_usd
+
+    scene, swarm = spin_swarm()
+    sim = ws.Simulator(scene, swarm, workers=1, device="cpu")
+    traj = sim.run(FRAMES, every=1, velocities=True)
+    out = write_usd(tmp_path / f"births.{fmt}", scene, traj, stride=4)
+    assert compliance_errors(out) == []
+    stage = Usd.Stage.Open(str(out))
+    instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Spheres"))
+    invisible = instancer.GetInvisibleIdsAttr()
+    written = traj.frame[np.unique(np.r_[np.arange(0, len(traj), 4), len(traj) - 1])]
+    for frame in written:
+        hidden = sorted(np.asarray(invisible.Get(float(frame)), dtype=np.int64).tolist())
+        assert hidden == np.flatnonzero(BIRTHS > frame).tolist(), frame
+        # what a renderer draws: the instancer's own visibility mask
+        mask = np.asarray(instancer.ComputeMaskAtTime(float(frame)))
+        if mask.size:
+            assert mask.tolist() == (BIRTHS <= frame).tolist()
+    back = read_usd(out)
+    assert back.frame.tolist() == written.tolist()
+    assert back.birth_frame.tolist() == BIRTHS.tolist()
+    rows = np.searchsorted(traj.frame, written)
+    for name in ("position", "orientation", "velocity"):
+        want = getattr(traj, name)[rows].astype(np.float32)
+        assert np.array_equal(getattr(back, name), want, equal_nan=True), name
+    assert np.isnan(back.position[~back.alive()]).all()
+    assert not np.isnan(back.position[back.alive()]).any()

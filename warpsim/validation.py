@@ -502,8 +502,18 @@ def emitter_fields(values: Mapping[str, object], where: str = "") -> dict[str, o
         direction = _tuple3(direction)
         cone = scalar(name("cone_deg"), 180.0 if values["cone_deg"] is None
                       else values["cone_deg"], minimum=0.0, maximum=180.0)
+    count = positive_int(name("count"), values["count"])
+    rate, duration = values.get("rate"), values.get("duration")
+    if rate is not None:
+        rate = scalar(name("rate"), rate, positive=True)
+    if duration is not None:
+        duration = scalar(name("duration"), duration, positive=True)
+    if rate is not None and duration is not None and round(rate * duration) != count:
+        raise ValueError(f"{name('rate')} x {name('duration')} = {rate * duration:g} spheres, "
+                         f"but {name('count')} is {count}: give one of rate and duration, or "
+                         f"both with rate x duration = count")
     return {
-        "count": positive_int(name("count"), values["count"]),
+        "count": count,
         "center": _tuple3(vec3(name("center"), values["center"])),
         "half_extents": _tuple3(nonnegative_vec3(name("half_extents"), values["half_extents"])),
         "radius": scalar_or_range(name("radius"), values["radius"], minimum=0.0),
@@ -517,6 +527,9 @@ def emitter_fields(values: Mapping[str, object], where: str = "") -> dict[str, o
         "angular_momentum": _tuple3(vec3(name("angular_momentum"), values["angular_momentum"])),
         "seed": positive_int(name("seed"), values["seed"], minimum=0),
         "clearance": scalar(name("clearance"), values["clearance"], minimum=0.0),
+        "start": scalar(name("start"), values.get("start", 0.0), minimum=0.0),
+        "rate": rate,
+        "duration": duration,
     }
 
 

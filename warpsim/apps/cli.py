@@ -365,7 +365,8 @@ def _cmd_run(args) -> int:
     n_records = len(sorted(set(range(start, end + 1, every)) | {end}))
     from .. import export
 
-    spinning = bool(scene.friction > 0.0 or np.any(np.asarray(scene.emitter.angular_momentum) != 0.0))
+    spinning = bool(scene.friction > 0.0
+                    or np.any(np.asarray(scene.emitter.angular_momentum) != 0.0))
     estimate = export.estimate_usd_bytes(n_written, n_records, out.suffix, boxes=scene.boxes,
                                          spinning=spinning, velocities=args.velocities)
     if estimate > args.max_bytes:
@@ -384,7 +385,7 @@ def _cmd_run(args) -> int:
     from ..distributed.draw import DEFAULT_BLOCK, sharded_spawn
 
     swarm = sharded_spawn(scene, n, args.seed, DEFAULT_BLOCK if args.block is None
-                          else check.positive_int("block", args.block))
+                          else check.positive_int("block", args.block), dt=args.dt)
     extra = _simulator_options(args)
     sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
                        device=args.device, precision=args.precision,
