@@ -6,6 +6,8 @@ kernel without the births feature), its frame ``k`` compared with frame ``b + k`
 with births, bit for bit, its contacts with their frames shifted by ``b``.
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -170,3 +172,126 @@ def test_usd_hides_the_unborn_and_reads_them_back_as_nan(tmp_path, fmt):
         assert np.array_equal(getattr(back, name), want, equal_nan=True), name
     assert np.isnan(back.position[~back.alive()]).all()
     assert not np.isnan(back.position[back.alive()]).any()
+
+
+# --- scene files: [emitter] start, rate, duration --------------------------------------------
+
+NOZZLE_DT = 1.0 / 120.0
+
+
+def test_nozzle_births_are_the_nearest_frames_of_the_emission_times():
+    scene = ws.Scene.load("nozzle")
+    swarm = scene.spawn(n=50)
+    # sphere k is emitted at k / 200 s: frame 0.6 k, rounded to the nearest (halves to even)
+    by_hand = [int(np.rint(0.6 * k)) for k in range(50)]
+    assert swarm.birth_frame.tolist() == by_hand
+    assert scene.spawn(n=50, dt=NOZZLE_DT / 2).birth_frame.tolist() == [
+        int(np.rint(1.2 * k)) for k in range(50)]
+    # the same spheres whatever the births: the draw does not depend on them
+    plain = replace(scene.emitter, rate=None).spawn(scene.boxes, n=50)
+    assert np.array_equal(plain.position, swarm.position) and not plain.has_births
+
+
+@pytest.mark.parametrize("table, frames", [
+    ({"duration": 0.5}, [int(np.rint(k * 0.5 / 10 * 120)) for k in range(10)]),
+    ({"rate": 20.0, "duration": 0.5}, [int(np.rint(k / 20 * 120)) for k in range(10)]),
+    ({"start": 0.25}, [30] * 10),
+    ({"start": 0.25, "rate": 40.0}, [int(np.rint((0.25 + k / 40) * 120)) for k in range(10)]),
+])
+def test_emitter_tables_give_their_birth_frames(table, frames):
+    emitter = ws.Emitter.from_table({"count": 10, **table})
+    assert emitter.birth_frames(NOZZLE_DT).tolist() == frames
+
+
+@pytest.mark.parametrize("table, message", [
+    ({"rate": 0.0}, "emitter.rate must be > 0"),
+    ({"rate": -1.0}, "emitter.rate must be > 0"),
+    ({"duration": 0.0}, "emitter.duration must be > 0"),
+    ({"start": -1.0}, "emitter.start must be >= 0"),
+    ({"rate": "fast"}, "emitter.rate must be a number"),
+    ({"rate": 30.0, "duration": 0.5},
+     r"emitter.rate x emitter.duration = 15 spheres, but emitter.count is 10"),
+])
+def test_bad_emission_timing_is_refused_naming_the_key(table, message):
+    with pytest.raises(ValueError, match=message):
+        ws.Emitter.from_table({"count": 10, **table})
+
+
+def test_an_emitter_of_births_needs_the_runs_dt():
+    scene = ws.Scene.load("nozzle")
+    with pytest.raises(ValueError, match="spawn it with the run's dt"):
+        scene.emitter.spawn(scene.boxes, n=4)
+
+
+# --- error reports: each sphere against the reference from its birth -------------------------
+
+def test_error_report_measures_each_sphere_from_its_birth():
+    from warpsim.analysis.error_report import compare
+
+    scene, drawn = spin_swarm(np.zeros(6, dtype=np.int64))
+    born_late = ws.Swarm(drawn.position, drawn.velocity, drawn.radius, drawn.mass,
+                         birth_frame=12)
+    late = ws.Simulator(scene, born_late, workers=1, device="cpu")
+    traj = late.run(48, every=1)
+    plain = ws.Simulator(scene, drawn, workers=1, device="cpu")
+    plain_traj = plain.run(36, every=1)
+    for got, want in ((compare(late, scene, born_late, sample=3),
+                       compare(plain, scene, drawn, sample=3)),
+                      (compare(traj, scene, born_late, sample=3),
+                       compare(plain_traj, scene, drawn, sample=3))):
+        got, want = got.to_dict(), want.to_dict()
+        assert got["invariants"].pop("frames") == 48 and want["invariants"].pop("frames") == 36
+        assert got["horizon_s"] == pytest.approx(36 * scene.dt)
+        for key in ("sample", "horizon_s", "contacts", "position_error", "divergence",
+                    "invariants", "reference", "energy"):
+            assert got[key] == want[key], key
+    # spheres not born by the end are never sampled
+    mixed = ws.Swarm(drawn.position, drawn.velocity, drawn.radius, drawn.mass,
+                     birth_frame=[0, 60, 0, 60, 0, 60])
+    sim = ws.Simulator(scene, mixed, workers=1, device="cpu")
+    sim.step(30)
+    report = compare(sim, scene, mixed, sample=6)
+    assert report.sample.tolist() == [0, 2, 4]
+    assert report.invariants["spheres"] == 3
+
+
+def test_file_estimate_counts_the_unborn_slots_the_file_holds(tmp_path):
+    pytest.importorskip("pxr")
+    from warpsim.export import estimate_usd_bytes, write_usd
+
+    scene = ws.Scene.load("nozzle")
+    swarm = scene.spawn(n=300)
+    traj = ws.Simulator(scene, swarm, device="cpu").run(scene.frames, every=2)
+    unborn = int((~traj.alive()).sum())
+    assert unborn > 0.2 * traj.alive().size
+    for fmt in ("usdc", "usda"):
+        size = write_usd(tmp_path / f"n.{fmt}", scene, traj).stat().st_size
+        estimate = estimate_usd_bytes(len(swarm), len(traj), fmt, boxes=scene.boxes,
+                                      spinning=False, unborn=unborn)
+        assert abs(estimate - size) <= 0.1 * size, (fmt, estimate, size)
+
+
+@pytest.mark.slow
+def test_cli_births_at_another_dt_are_the_same_with_shards(tmp_path):
+    """``warpsim run`` counts births in frames of its ``--dt``, in one process and in shards."""
+    pytest.importorskip("pxr")
+    import subprocess
+    import sys
+
+    from warpsim.export import read_usd
+
+    def run(*extra):
+        out = tmp_path / f"nozzle{len(extra)}.usdc"
+        done = subprocess.run([sys.executable, "-m", "warpsim.apps.cli", "run", "nozzle", "-n",
+                               "40", "--frames", "30", "--dt", "0.005", "-o", str(out),
+                               "--block", "16", "--no-progress", *extra],
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        return read_usd(out)
+
+    plain, sharded = run(), run("--shards", "2")
+    births = np.rint(np.arange(40) / 200.0 / 0.005).astype(np.int64)  # k / 200 s at 5 ms
+    assert plain.birth_frame.tolist() == births.tolist()
+    assert sharded.birth_frame.tolist() == births.tolist()
+    assert np.array_equal(plain.position, sharded.position, equal_nan=True)
+    assert np.isnan(plain.position[~plain.alive()]).all()

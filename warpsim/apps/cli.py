@@ -196,6 +196,18 @@ def energy_line(sim, swarm, state) -> str:
     return energy_figures.line(energy_figures.figures(sim, swarm.position, state))
 
 
+def _unborn_written(args, scene, n: int, subset, start: int, end: int, every: int) -> int:
+    """Sphere-frames a run writes before their sphere's birth (0 without births)."""
+    if not getattr(scene.emitter, "emits_over_time", False):
+        return 0
+    births = scene.emitter.birth_frames(scene.dt if args.dt is None else args.dt, n)
+    if subset is not None:
+        births = births[subset]
+    recorded = np.array(sorted(set(range(start, end + 1, every)) | {end}), dtype=np.int64)
+    born = np.searchsorted(np.sort(births), recorded, side="right")  # born by each record
+    return int((births.size - born).sum())
+
+
 def _run_options(args) -> dict:
     """Keywords of :meth:`warpsim.Simulator.run` asked for on the command line, checked before
     anything runs."""
@@ -368,7 +380,9 @@ def _cmd_run(args) -> int:
     spinning = bool(scene.friction > 0.0
                     or np.any(np.asarray(scene.emitter.angular_momentum) != 0.0))
     estimate = export.estimate_usd_bytes(n_written, n_records, out.suffix, boxes=scene.boxes,
-                                         spinning=spinning, velocities=args.velocities)
+                                         spinning=spinning, velocities=args.velocities,
+                                         unborn=_unborn_written(args, scene, n, subset, start,
+                                                                end, every))
     if estimate > args.max_bytes:
         raise ValueError(f"{str(out)!r} would be about {estimate / 1e6:,.0f} MB "
                          f"({n_written} spheres x {n_records} frames), above --max-bytes "
