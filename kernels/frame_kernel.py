@@ -204,7 +204,13 @@ def frame_kernel(features: Features):
         if wp.static(births):
             born = birth_frame[i] - first_frame  # frames of this launch before its birth
         for f in range(frame_count):
-            if f >= born:
+            if wp.static(births):
+                if f >= born:
+                    x, v, L, o, energy, b, c = one_frame(x, v, L, o, energy, r, m, physics,
+                                                         boxes, broad, f + 1, sphere, events_out)
+                    bounces += b
+                    capped += c
+            else:
                 x, v, L, o, energy, b, c = one_frame(x, v, L, o, energy, r, m, physics, boxes,
                                                      broad, f + 1, sphere, events_out)
                 bounces += b
