@@ -295,3 +295,24 @@ def test_cli_births_at_another_dt_are_the_same_with_shards(tmp_path):
     assert sharded.birth_frame.tolist() == births.tolist()
     assert np.array_equal(plain.position, sharded.position, equal_nan=True)
     assert np.isnan(plain.position[~plain.alive()]).all()
+
+
+def test_preview_draws_only_the_born(tmp_path):
+    pytest.importorskip("pxr")
+    from PIL import Image, ImageChops
+
+    from warpsim.export import draw_frame, render_preview, write_usd
+    from warpsim.export.preview import scene_bounds
+
+    scene, swarm = spin_swarm()
+    traj = ws.Simulator(scene, swarm, workers=1, device="cpu").run(40, every=10)
+    out = write_usd(tmp_path / "births.usdc", scene, traj)
+    png = render_preview(out, 30, tmp_path / "frame.png", size=(160, 90))
+    born = BIRTHS <= 30
+    assert 0 < born.sum() < len(BIRTHS)
+    row = list(traj.frame).index(30)
+    bounds = scene_bounds(scene.boxes, traj.position[row][born], traj.radius[born])
+    want, _ = draw_frame(scene.boxes, traj.position[row][born].astype(np.float32),
+                         traj.orientation[row][born].astype(np.float32), traj.radius[born],
+                         size=(160, 90), bounds=bounds)
+    assert ImageChops.difference(Image.open(png).convert("RGB"), want).getbbox() is None
