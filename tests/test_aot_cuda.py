@@ -7,7 +7,8 @@ that would fail to build on a GPU fails here on the CPU-only machine first. Chec
 
 - in the suite (slow tier, a few minutes here): the frame kernel in both precisions and
   motions with every optional feature on (the most code), and the collide and bounce kernels in
-  both precisions and motions with the grid-then-BVH broad phase and every feature on;
+  both precisions and motions with the grid-then-BVH broad phase and every feature on, and the
+  frame kernel so again with the walked grid (``walk-bvh``);
 - ``WARPSIM_AOT=factories``: each factory over precision x motion x broad phase, with every
   feature on and, for the frame kernel, also with every one off;
 - ``WARPSIM_AOT=all``: the whole product of every flag of every factory (about 300 kernels).
