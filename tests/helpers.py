@@ -1,6 +1,7 @@
 """Shared helpers of the tests (imported as ``helpers``): the devices to test on, a tolerance
-table per precision, and scenes built by hand."""
+table per precision, scenes built by hand, and every kernel variant the factories make."""
 
+import itertools
 import os
 
 import numpy as np
@@ -67,3 +68,34 @@ def shaped_half_extents(rng, kind: str, low: float, high: float) -> np.ndarray:
     elif kind == "cube":
         h[:] = h[0]
     return h
+
+
+#: Both values of each boolean feature flag.
+FLAGS = (False, True)
+
+
+def every_kernel_variant() -> list[tuple[str, object]]:
+    """``(label, kernel)`` for every kernel every factory can return: the collide kernel per
+    precision x motion x broad phase, the bounce kernel also over ``spin`` x ``lossy``, the
+    frame kernel also over ``energy_correction`` x ``events``. Making a kernel object compiles
+    nothing (that happens at its first launch), so the whole product is cheap to enumerate.
+    The labels read ``factory/precision/motion/broad phase[/spin/lossy[/correction/events]]``.
+    """
+    from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
+    from warpsim.kernels.data import BROAD_PHASES, MOTIONS, PRECISIONS, Features
+    from warpsim.kernels.frame_kernel import frame_kernel
+
+    out = []
+    for p, m, b in itertools.product(PRECISIONS, MOTIONS, BROAD_PHASES):
+        f = Features(precision=p, motion=m, broad_phase=b)
+        out.append((f"collide/{p}/{m}/{b}", collide_kernel(f)))
+        for spin, lossy in itertools.product(FLAGS, FLAGS):
+            out.append((f"bounce/{p}/{m}/{b}/{spin}/{lossy}",
+                        bounce_kernel(f.but(spin=spin, lossy=lossy))))
+            for corr, events in itertools.product(FLAGS, FLAGS):
+                out.append((f"frame/{p}/{m}/{b}/{spin}/{lossy}/{corr}/{events}",
+                            frame_kernel(f.but(spin=spin, lossy=lossy, energy_correction=corr,
+                                               events=events))))
+    return out
+
+
