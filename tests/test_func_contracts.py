@@ -126,6 +126,9 @@ CAPSULE_CASES = {
                              (0, 1, 0)),
     "sphere: root beyond the end": ((-3, 0, 0), (1, 0, 0), (0, 0, 0), (0, 0, 0), 1, 1, 0, 1.0,
                                     (0, 0, 0)),
+    # a root exactly at t = 1 is in range: the segment's end touches (t in [0, 1], closed)
+    "sphere: root at the end": ((-3, 0, 0), (2, 0, 0), (0, 0, 0), (0, 0, 0), 1, 1, 1, 1.0,
+                                (-1, 0, 0)),
     # radius 0: the contact centre is the sphere's centre, so there is no normal (the
     # rounded-box sweep never asks: a Minkowski radius below SHARP_REL is a sharp box)
     "sphere: radius 0 (a point on the path)": ((-3, 0, 0), (4, 0, 0), (0, 0, 0), (0, 0, 0), 0,
@@ -139,6 +142,12 @@ CAPSULE_CASES = {
                                                                0.875, (-1, 0, 0)),
     "capsule: zero length is a sphere": ((-3, 0, 0), (4, 0, 0), (0, 0, 0), (0, 0, 0), 1, 0, 1,
                                          0.5, (-1, 0, 0)),
+    "capsule: side entry at the end": ((0.5, 3, 0), (0, -2, 0), (0, 0, 0), (1, 0, 0), 1, 0, 1,
+                                       1.0, (0, 1, 0)),
+    # a start on the side is a start in contact, a hit at t = 0 whatever the motion (the
+    # caller decides whether it goes in), as on the ball
+    "capsule: start on the side, moving away": ((0.5, 1, 0), (0, 1, 0), (0, 0, 0), (1, 0, 0),
+                                                1, 0, 1, 0.0, (0, 1, 0)),
     "capsule: miss beside the end": ((3, 0, 2), (-6, 0, 0), (-1, 0, 0), (1, 0, 0), 1, 0, 0, 1.0,
                                      (0, 0, 0)),
 }

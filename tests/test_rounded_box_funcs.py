@@ -95,6 +95,7 @@ DISTANCE_CASES = {
                          (-np.sqrt(0.5), 0.0, np.sqrt(0.5))),
     "inside, nearest -z": ((0.5, 0.125, -0.125), -0.125 - 0.125, (0.0, 0.0, -1.0)),
     "inside, nearest +x": ((0.875, 0.0, 0.0), -0.125 - 0.125, (1.0, 0.0, 0.0)),
+    "inside, nearest +y": ((0.25, 0.375, 0.0), -0.125 - 0.125, (0.0, 1.0, 0.0)),
     "inside, x, y and z tie": ((0.75, -0.25, 0.0), -0.25 - 0.125, (1.0, 0.0, 0.0)),
     "centre: z nearest, + side": ((0.0, 0.0, 0.0), -0.25 - 0.125, (0.0, 0.0, 1.0)),
     "on the core face": ((1.0, 0.0, 0.0), -0.125, (1.0, 0.0, 0.0)),
@@ -158,3 +159,45 @@ def test_random_segments_match_the_reference(kind, precision):
     core, _ = core_distance_and_normal(a, np.concatenate(h_rows))
     np.testing.assert_allclose(out["distance"], core - radius,
                                atol=band["pos"] * (1 + np.abs(a).max()))
+
+
+@pytest.mark.parametrize("slope, moving_in", [(32, False), (128, True)])
+def test_start_on_the_surface_moves_in_beyond_the_tangent_margin(slope, moving_in, precision):
+    """A start on a face, sliding along it with an inward slope of ``slope`` machine epsilons
+    (``d . n = -slope eps |d|`` up to the slope's square): in only beyond the tangent margin of
+    64 eps (``TANGENT_REL``), whatever the segment's length (1 and 1024 m here)."""
+    eps = float(np.finfo(types_of(precision).np_dtype).eps)
+    a = np.array([[1.5, 0.0, 0.0]] * 2)
+    d = np.array([[-slope * eps, 1.0, 0.0], [-slope * eps * 1024.0, 1024.0, 0.0]])
+    out = sweep_rows(precision, a, d, (1.0, 1.0, 1.0), 0.5)
+    np.testing.assert_array_equal(out["hit"], [int(moving_in)] * 2)
+    np.testing.assert_array_equal(out["t"], [0.0 if moving_in else 1.0] * 2)
+    np.testing.assert_array_equal(out["normal"], [(1.0, 0.0, 0.0) if moving_in else (0, 0, 0)] * 2)
+
+
+#: Starts a few ulps outside a sharp box's edge or corner (``R = 8 eps``, below ``SHARP_REL``
+#: of the scale): inside the grown box, outside the rounded one. Offsets past the core box per
+#: axis in units of eps (0: inside that slab), with signs, and the face the start sticks out of
+#: the most (ties: the lower axis), whose normal the hit at ``t = 0`` takes.
+SHARP_STARTS = {
+    "edge, y sticks out most": ((6, -7, 0), (0.0, -1.0, 0.0)),
+    "edge, x and y tie": ((7, 7, 0), (1.0, 0.0, 0.0)),
+    "corner, z sticks out most": ((-6, 7, 7.5), (0.0, 0.0, 1.0)),
+}
+
+
+def test_sharp_start_between_the_grown_and_the_rounded_box(precision):
+    """A sharp box's start inside the grown box but outside the rounding, moving in: a hit at
+    ``t = 0`` whose normal is that of the face the start sticks out of the most."""
+    eps = float(np.finfo(types_of(precision).np_dtype).eps)
+    h = np.array([1.0, 0.75, 0.5])
+    a, normals = [], []
+    for offsets, normal in SHARP_STARTS.values():
+        sign = np.sign(offsets) + (np.asarray(offsets) == 0)
+        a.append(sign * (h * (np.asarray(offsets) != 0) + np.abs(offsets) * eps))
+        normals.append(normal)
+    a = np.array(a)
+    out = sweep_rows(precision, a, -0.25 * np.sign(a), h, 8 * eps)
+    for k, name in enumerate(SHARP_STARTS):
+        assert out["hit"][k] == 1 and out["t"][k] == 0.0, name
+        np.testing.assert_array_equal(out["normal"][k], normals[k], err_msg=name)
