@@ -63,8 +63,9 @@ def run_against(box, x0, v0, r, expected, t_end, gravity=(0.0, -G, 0.0)):
 
 
 def stays_outside(box, expected, r, t_end) -> bool:
-    """Whether the analytic motion stays off the box (it has no bounce in it)."""
-    x, _ = expected.at(np.linspace(0.0, t_end, 400))
+    """Whether the analytic motion's last piece (a flight or a face slide; the slides before it
+    are on the surface by construction) stays off the box: the motion has no bounce in it."""
+    x, _ = expected.at(np.linspace(expected.breaks[-1], t_end, 400))
     return bool(box.signed_distance(x)[:, 0].min() - r > -1e-9)
 
 
@@ -279,3 +280,53 @@ def test_energy_is_conserved_on_curved_slides(shape):
     assert np.abs(e - e[0]).max() < ENERGY_REL_TOL * abs(e[0])
     gap = box.signed_distance(run.position[:, 0])[:, 0] - r
     np.testing.assert_allclose(gap, 0.0, atol=1e-13)  # on the surface all along
+
+
+# -- the slide's other ends ---------------------------------------------------------------------
+
+
+def test_slide_on_an_edge_meets_another_box_where_the_surfaces_cross():
+    """Sliding from rest down a rounded edge (rb = 0.15, r = 0.05) towards a wall whose face
+    the centre reaches at 25 degrees: the first bounce is on the wall at the point of the
+    cylinder at that angle, at the analytic instant."""
+    rb, r = 0.15, 0.05
+    R = rb + r
+    stop = np.radians(25.0)
+    wall_x = 0.5 + R * np.sin(stop) + r
+    boxes = ws.RoundedBoxes(center=[[0.0, -0.5, 0.0], [wall_x + 0.5, 0.6, 0.0]],
+                            half_extents=[[0.5, 0.5, 0.3], [0.5, 0.5, 0.5]], radius=[rb, 0.0])
+    edge = np.array([0.5, 0.0, 0.0])
+    t0 = np.radians(10.0)
+    x0 = edge + R * np.array([np.sin(t0), np.cos(t0), 0.0])
+    run = reference.simulate(ws.Scene(boxes), ws.Swarm(position=[x0], velocity=[[0, 0, 0]],
+                                                       radius=r), 0.3)
+    first = run.events.of_sphere(0).bounces()
+    assert first.box[0] == 1
+    contact = edge + R * np.array([np.sin(stop), np.cos(stop), 0.0])
+    np.testing.assert_allclose(first.position[0], contact, atol=POS_TOL)
+    expected = sa.cylinder_slide(edge, (0.0, 0.0, 1.0), R, x0, np.zeros(3), (0.0, -G, 0.0))
+    x, _ = expected.at([first.time[0]])
+    np.testing.assert_allclose(x[0], contact, atol=POS_TOL)
+
+
+def test_slide_along_an_edge_onto_its_corner():
+    """Released on a rounded edge moving at 1 m/s along it, the sphere passes the edge's end
+    onto the corner's sphere before it leaves: energy and the surface hold through the change
+    of region, and it leaves the surface beyond the edge's end."""
+    rb, r = 0.15, 0.05
+    R = rb + r
+    h = np.array([0.5, 0.5, 0.3])
+    box = ws.RoundedBoxes(center=[[0.0, -0.5, 0.0]], half_extents=[h], radius=[rb])
+    t0 = np.radians(10.0)
+    x0 = np.array([0.5, 0.0, 0.1]) + R * np.array([np.sin(t0), np.cos(t0), 0.0])
+    scene = ws.Scene(box)
+    swarm = ws.Swarm(position=[x0], velocity=[[0.0, 0.0, 1.0]], radius=r)
+    times = np.linspace(0.0, 0.6, 601)
+    run = reference.simulate(scene, swarm, 0.6, times)
+    assert not run.incomplete.any() and not len(run.events.of_sphere(0).bounces())
+    e = run.energy(scene, swarm)[:, 0]
+    assert np.abs(e - e[0]).max() < ENERGY_REL_TOL * abs(e[0])
+    gap = box.signed_distance(run.position[:, 0])[:, 0] - r
+    off = np.flatnonzero(gap > 1e-12)[0]
+    assert np.abs(gap[:off]).max() < 1e-13  # on the surface until it leaves
+    assert run.position[off, 0, 2] > h[2]  # on the corner by then
