@@ -30,6 +30,19 @@ VEL_TOL = 1e-8
 #: only a few roundings of it remain.
 ENERGY_REL_TOL = 1e-12
 
+#: Distance [m] of the centre from the Minkowski surface while it slides: the slide puts it
+#: back on the surface at each step; what is left is the rounding of the distance at unit scale.
+SURFACE_TOL = 1e-13
+
+#: Off the surface [m]: a gap above this is a flight (a hundred times SURFACE_TOL and more).
+LIFT_GAP = 1e-11
+
+#: Float64 rounding of the set-up's own constructions (rotations, angles), unit scale.
+ROUNDING = 1e-12
+
+#: Angular margin [rad] that keeps a drawn start off the border of the edge's region.
+REGION_MARGIN = 1e-3
+
 #: Sample times per run: enough to see every piece of the motion (slide, detachment, flight).
 SAMPLES = 61
 
@@ -66,7 +79,7 @@ def stays_outside(box, expected, r, t_end) -> bool:
     """Whether the analytic motion's last piece (a flight or a face slide; the slides before it
     are on the surface by construction) stays off the box: the motion has no bounce in it."""
     x, _ = expected.at(np.linspace(expected.breaks[-1], t_end, 400))
-    return bool(box.signed_distance(x)[:, 0].min() - r > -1e-9)
+    return bool(box.signed_distance(x)[:, 0].min() - r > -POS_TOL)
 
 
 # -- a face slide off an edge ------------------------------------------------------------------
@@ -130,8 +143,8 @@ def test_slide_on_a_rounded_edge(angle, spin, axial, tilt, turn, far, r):
         side = -side
     psi_top_face = np.arctan2(m[:, 1] @ side, m[:, 1] @ up)
     psi_side_face = np.arctan2(m[:, 0] @ side, m[:, 0] @ up)
-    psi = max(np.radians(angle), psi_top_face + 1e-3)
-    assume(psi < psi_side_face - 1e-3)
+    psi = max(np.radians(angle), psi_top_face + REGION_MARGIN)
+    assume(psi < psi_side_face - REGION_MARGIN)
     n = np.cos(psi) * up + np.sin(psi) * side
     tangent = -np.sin(psi) * up + np.cos(psi) * side
     g_perp = float(np.linalg.norm(g - (g @ axis) * axis))
@@ -164,10 +177,10 @@ def test_release_from_rest_on_a_rounded_edge_detaches_at_the_analytic_angle(angl
     t_d = expected.break_of("flight")
     x_d, _ = expected.at([t_d])
     off = x_d[0] - edge
-    np.testing.assert_allclose(off[1] / R, 2.0 / 3.0 * np.cos(t0), atol=1e-12)
+    np.testing.assert_allclose(off[1] / R, 2.0 / 3.0 * np.cos(t0), atol=ROUNDING)
     run, _ = run_against(box, x0, np.zeros(3), r, expected, t_d + 0.2)
     gap = box.signed_distance(run.position[:, 0])[:, 0] - r
-    assert gap.min() > -1e-12
+    assert gap.min() > -SURFACE_TOL
 
 
 def test_slide_over_an_edge_lands_on_the_next_face():
@@ -182,7 +195,7 @@ def test_slide_over_an_edge_lands_on_the_next_face():
     center = np.array([0.0, -2.0, 0.0])
     box = ws.RoundedBoxes(center=[center], half_extents=[h], rotation=[q], radius=[rb])
     ridge = center + m @ [h[0], h[1], 0.0]
-    assert abs(ridge[0]) < 1e-12  # the edge along z at the top
+    assert abs(ridge[0]) < ROUNDING  # the edge along z at the top
     t0 = np.radians(5.0)
     x0 = ridge + R * np.array([-np.sin(t0), np.cos(t0), 0.0])  # towards the -x side
     v0 = np.array([0.0, 0.0, 0.3])
@@ -237,7 +250,7 @@ def test_slide_on_a_box_corner(angle):
     h = np.array([0.4, 0.4, 0.4])
     box = ws.RoundedBoxes(center=[[0.0, 0.0, 0.0]], half_extents=[h], rotation=[q], radius=[rb])
     corner = m @ h
-    np.testing.assert_allclose(m @ diag, [0.0, 1.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(m @ diag, [0.0, 1.0, 0.0], atol=ROUNDING)
     face = m @ [1.0, 0.0, 0.0]
     toward = face - face[1] * np.array([0.0, 1.0, 0.0])
     toward /= np.linalg.norm(toward)
@@ -279,7 +292,7 @@ def test_energy_is_conserved_on_curved_slides(shape):
     e = run.energy(scene, swarm)[:, 0]
     assert np.abs(e - e[0]).max() < ENERGY_REL_TOL * abs(e[0])
     gap = box.signed_distance(run.position[:, 0])[:, 0] - r
-    np.testing.assert_allclose(gap, 0.0, atol=1e-13)  # on the surface all along
+    np.testing.assert_allclose(gap, 0.0, atol=SURFACE_TOL)  # on the surface all along
 
 
 # -- the slide's other ends ---------------------------------------------------------------------
@@ -327,6 +340,6 @@ def test_slide_along_an_edge_onto_its_corner():
     e = run.energy(scene, swarm)[:, 0]
     assert np.abs(e - e[0]).max() < ENERGY_REL_TOL * abs(e[0])
     gap = box.signed_distance(run.position[:, 0])[:, 0] - r
-    off = np.flatnonzero(gap > 1e-12)[0]
-    assert np.abs(gap[:off]).max() < 1e-13  # on the surface until it leaves
+    off = np.flatnonzero(gap > LIFT_GAP)[0]
+    assert np.abs(gap[:off]).max() < SURFACE_TOL  # on the surface until it leaves
     assert run.position[off, 0, 2] > h[2]  # on the corner by then
