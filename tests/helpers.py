@@ -77,9 +77,11 @@ FLAGS = (False, True)
 def every_kernel_variant() -> list[tuple[str, object]]:
     """``(label, kernel)`` for every kernel every factory can return: the collide kernel per
     precision x motion x broad phase, the bounce kernel also over ``spin`` x ``lossy``, the
-    frame kernel also over ``energy_correction`` x ``events``. Making a kernel object compiles
-    nothing (that happens at its first launch), so the whole product is cheap to enumerate.
-    The labels read ``factory/precision/motion/broad phase[/spin/lossy[/correction/events]]``.
+    frame kernel also over ``energy_correction`` x ``events``, and once with births (spin and
+    events on). Making a kernel object compiles nothing (that happens at its first launch),
+    so the whole product is cheap to enumerate. The labels read
+    ``factory/precision/motion/broad phase[/spin/lossy[/correction/events]]`` (``.../births``
+    for the births variant).
     """
     from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
     from warpsim.kernels.data import BROAD_PHASES, MOTIONS, PRECISIONS, Features
@@ -96,6 +98,8 @@ def every_kernel_variant() -> list[tuple[str, object]]:
                 out.append((f"frame/{p}/{m}/{b}/{spin}/{lossy}/{corr}/{events}",
                             frame_kernel(f.but(spin=spin, lossy=lossy, energy_correction=corr,
                                                events=events))))
+        out.append((f"frame/{p}/{m}/{b}/births",
+                    frame_kernel(f.but(spin=True, events=True, births=True))))
     return out
 
 
