@@ -120,7 +120,7 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
             side = -ONE
         return axis, side
 
-    @wp.func
+    @wp.func(inline=False)
     def holds_on(x: vec3, v: vec3, g: vec3, h: vec3, big_r: scalar, mask: vec3, sig: vec3):
         """Whether a sphere on the curved feature ``(mask, sig)`` with velocity ``v`` (all
         local) is pressed onto it: a positive normal force and a resolvable radius."""
@@ -136,7 +136,362 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                 out = 1
         return out
 
-    @wp.func
+    @wp.struct
+    class Support:
+        """What holds a sphere within the frame (``ballistic_path``'s loop state)."""
+
+        mode: int
+        """``FREE``, ``FACE``, ``PLANE`` or ``CURVED``."""
+        supports: int
+        """Planar supports: 1 on a face, 1 to 3 on planes (a crease, a wedge)."""
+        n1: wp.types.vector(3, scalar)
+        """The first planar support's unit normal, world."""
+        n2: wp.types.vector(3, scalar)
+        """The second's."""
+        box: int
+        """FACE, CURVED: the support's box."""
+        face_axis: int
+        """FACE: the face's local normal axis."""
+        face_side: scalar
+        """FACE: its side, +-1."""
+        mask: wp.types.vector(3, scalar)
+        """CURVED: the feature's constrained local axes (``slide.feature_of``)."""
+        sig: wp.types.vector(3, scalar)
+        """CURVED: their sides."""
+        escape_box: int
+        """Free flight just off this box's curved part (-1: none) ..."""
+        escape_left: scalar
+        """... which it cannot touch again for this long [s]."""
+        g_eff: wp.types.vector(3, scalar)
+        """The acceleration of the free or planar legs [m/s^2]: gravity, or its part along
+        the support's plane or crease."""
+
+    @wp.func(inline=True)
+    def free_support(g: vec3):
+        """Nothing holds the sphere: free flight under ``g``."""
+        st = Support()
+        st.mode = FREE
+        st.supports = 0
+        st.n1 = vec3(ZERO, ZERO, ZERO)
+        st.n2 = vec3(ZERO, ZERO, ZERO)
+        st.box = -1
+        st.face_axis = 0
+        st.face_side = ONE
+        st.mask = vec3(ZERO, ZERO, ZERO)
+        st.sig = vec3(ONE, ONE, ONE)
+        st.escape_box = -1
+        st.escape_left = ZERO
+        st.g_eff = g
+        return st
+
+    @wp.func(inline=False)
+    def held_leg(st: Support, a: vec3, v: vec3, g: vec3, rest: scalar, r: scalar, boxes: Boxes,
+                 broad: BroadPhase):
+        """One leg of a sphere on a face, on a curved part, or just off one (out of line: a
+        free sphere never runs it).
+
+        Returns:
+            ``(kind, box, n, contact, u, a, v, rest, st)``: ``kind`` 0 the frame is done, 1 a
+            contact with ``box`` (normal ``n``, centre ``contact``, velocity ``u`` there), 2 a
+            support may start on ``st.box``'s feature ``(st.mask, st.sig)`` at ``a``, 3 go on.
+        """
+        kind = int(3)
+        box = int(-1)
+        n = vec3(ZERO, ZERO, ZERO)
+        contact = a
+        u = v
+        if st.mode == CURVED:
+            leg, s, a, v, mask, sig, hit_box, hit_n, n_sup = curved_leg(
+                a, v, g, rest, r, boxes, broad, st.box, st.mask, st.sig)
+            st.mask = mask
+            st.sig = sig
+            rest = wp.max(rest - s, ZERO)
+            if leg == LEG_END:
+                kind = 0
+            elif leg == LEG_DETACH:
+                b = st.box
+                st = free_support(g)
+                xl, vl, gl = box_frame(boxes, b, a, v, g)
+                st.escape_box = b
+                st.escape_left = escape_time(xl, vl, gl, rest, boxes.half_extents[b],
+                                             boxes.radius[b] + r, mask, sig)
+            elif leg == LEG_REGION:
+                kind = 2
+            else:
+                kind = 1
+                box = hit_box
+                n = hit_n
+                contact = a
+                u = v
+                st.n1 = n_sup  # the curved support's tangent plane, for a crease
+        else:
+            tau = rest
+            skip = st.escape_box
+            s = tau
+            if skip >= 0:
+                tau = wp.min(st.escape_left, rest)
+                st.escape_box = -1
+                box, s, n = nearest_except(a, v, st.g_eff, tau, r, boxes, broad, skip)
+            else:
+                box, s, n = nearest_hit_arc(a, v, st.g_eff, tau, r, boxes, broad)
+            s_exit = tau
+            exit_axis = int(-1)
+            exit_side = ONE
+            if st.mode == FACE:
+                xl, vl, gl = box_frame(boxes, st.box, a, v, st.g_eff)
+                s_exit, exit_axis, exit_side = face_exit(
+                    xl, vl, gl, tau, boxes.half_extents[st.box], st.face_axis)
+            if exit_axis >= 0 and s_exit < s:
+                # the contact point leaves the face: the edge decides what follows
+                a = arc_point(a, v, st.g_eff, s_exit)
+                v = v + s_exit * st.g_eff
+                rest = wp.max(rest - s_exit, ZERO)
+                mask = vec3(ZERO, ZERO, ZERO)
+                mask[st.face_axis] = ONE
+                mask[exit_axis] = ONE
+                sig = vec3(ONE, ONE, ONE)
+                sig[st.face_axis] = st.face_side
+                sig[exit_axis] = exit_side
+                st.mask = mask
+                st.sig = sig
+                kind = 2
+            elif box < 0:
+                a = arc_point(a, v, st.g_eff, tau)
+                v = v + tau * st.g_eff
+                if tau >= rest:
+                    kind = 0
+                rest = wp.max(rest - tau, ZERO)
+            else:
+                kind = 1
+                contact = arc_contact_centre(a, v, st.g_eff, s, n, boxes.radius[box] + r,
+                                             boxes.extent[box])
+                u = v + s * st.g_eff
+                rest = wp.max(rest - s, ZERO)
+        return kind, box, n, contact, u, a, v, rest, st
+
+    @wp.func(inline=False)
+    def start_support(st: Support, a: vec3, v: vec3, g: vec3, rest: scalar, r: scalar,
+                      boxes: Boxes):
+        """Whether the feature ``(st.mask, st.sig)`` of ``st.box`` that the centre ``a`` just
+        reached holds the sphere (velocity ``v``): a face gravity presses on, a curved part
+        with a normal force. Out of line.
+
+        Returns:
+            ``(holds, st, v, n)``: the support state (free flight, with the escape of a curved
+            part, when it does not hold), the velocity along it and its world normal.
+        """
+        xl, vl, gl = box_frame(boxes, st.box, a, v, g)
+        h = boxes.half_extents[st.box]
+        big_r = boxes.radius[st.box] + r
+        mask = st.mask
+        sig = st.sig
+        count = int(mask[0] + mask[1] + mask[2])
+        holds = int(0)
+        n_w = vec3(ZERO, ZERO, ZERO)
+        axis = int(0)
+        if count == 1:
+            axis, side = dominant_axis(mask)
+            n_l = vec3(ZERO, ZERO, ZERO)
+            n_l[axis] = sig[axis]
+            n_w = boxes.rotation[st.box] * n_l
+            if wp.dot(g, n_w) < -TANGENT_REL * wp.length(g):
+                holds = 1
+        else:
+            holds = holds_on(xl, vl, gl, h, big_r, mask, sig)
+            cf = wp.cw_mul(mask, wp.cw_mul(sig, h))
+            n_w = boxes.rotation[st.box] * wp.normalize(wp.cw_mul(mask, xl - cf))
+        b = st.box
+        if holds == 0:
+            st = free_support(g)
+            if count > 1:
+                st.escape_box = b
+                st.escape_left = escape_time(xl, vl, gl, rest, h, big_r, mask, sig)
+        elif count == 1:
+            st.mode = FACE
+            st.face_axis = axis
+            st.face_side = sig[axis]
+            st.supports = 1
+            st.n1 = n_w
+            st.g_eff = along_plane(g, n_w)
+            v = along_plane(v, n_w)
+        else:
+            st.mode = CURVED
+            st.supports = 0
+            st.g_eff = g
+        return holds, st, v, n_w
+
+    @wp.func(inline=False)
+    def support_contact(st: Support, u: vec3, n: vec3, un: scalar, contact: vec3, box: int,
+                        rest: scalar, r: scalar, g: vec3, boxes: Boxes):
+        """A contact with gravity pressing and at most ``RESTING_SPEED`` of normal speed: a
+        support on a face (a face slide), a curved part (a curved slide), a second plane (the
+        crease) or a third (wedged); a curved part with no normal force does not hold it (a
+        tangent touch flies on, else it bounces). Out of line.
+
+        Returns:
+            ``(held, graze, st, u)``: ``held`` 1 for a support (``u`` along it), ``graze`` 1 for
+            a tangent touch (``u`` unchanged); both 0: a bounce (``st`` unchanged).
+        """
+        held = int(0)
+        graze = int(0)
+        out = st
+        if out.mode == CURVED:
+            out.supports = 1  # its tangent plane (n1) against this new support
+        single = int(0)
+        if out.supports == 0 or (out.supports == 1 and wp.dot(n, out.n1) >= COPLANAR):
+            single = 1
+        elif out.supports == 1:
+            if wp.dot(along_plane(g, n), out.n1) >= ZERO and wp.dot(
+                    along_plane(u, n), out.n1) >= ZERO:
+                single = 1  # sliding off the old plane onto the new one
+        if single == 1:
+            xl, vl, gl = box_frame(boxes, box, contact, u, g)
+            h = boxes.half_extents[box]
+            big_r = boxes.radius[box] + r
+            f_mask, f_sig, count = feature_of(xl, h, big_r)
+            if count <= 1:
+                held = 1
+                out.mode = FACE
+                out.box = box
+                axis, side = dominant_axis(wp.transpose(boxes.rotation[box]) * n)
+                out.face_axis = axis
+                out.face_side = side
+                out.supports = 1
+                out.n1 = n
+                out.g_eff = along_plane(g, n)
+                u = along_plane(u, n)
+            elif holds_on(xl, vl, gl, h, big_r, f_mask, f_sig) == 1:
+                held = 1
+                out.mode = CURVED
+                out.box = box
+                out.mask = f_mask
+                out.sig = f_sig
+                out.supports = 0
+                out.g_eff = g
+                u = along_plane(u, n)
+            elif -un <= TOUCH * wp.length(u):
+                # tangent to a curved part (within the sweep's resolution of a double root)
+                graze = 1
+                out = free_support(g)
+                out.escape_box = box
+                out.escape_left = escape_time(xl, vl, gl, rest, h, big_r, f_mask, f_sig)
+            else:
+                out = st
+        elif out.supports == 1:  # along the crease of the two planes
+            held = 1
+            out.mode = PLANE
+            out.supports = 2
+            out.n2 = n
+            crease = wp.normalize(wp.cross(out.n1, n))
+            out.g_eff = wp.dot(g, crease) * crease
+            u = wp.dot(u, crease) * crease
+        else:  # wedged by three supports
+            held = 1
+            out.mode = PLANE
+            out.g_eff = vec3(ZERO, ZERO, ZERO)
+            u = vec3(ZERO, ZERO, ZERO)
+        return held, graze, out, u
+
+    @wp.func(inline=False)
+    def general_step(st: Support, a: vec3, v: vec3, L: vec3, energy: scalar, rest: scalar,
+                     bounces: int, capped: int, supported: int, r: scalar, m: scalar,
+                     physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
+                     sphere: int, events: EventBuffer, pre_box: int, pre_s: scalar,
+                     pre_n: vec3):
+        """One pass of :func:`ballistic_path`'s loop for a sphere held by a support or just
+        off one, or at a contact that may be a support (``pre_box >= 0``: the free leg's
+        contact, ``pre_s`` [s] along it with normal ``pre_n``). Out of line, so the free
+        flight's loop stays small.
+
+        Returns:
+            ``(a, v, L, energy, rest, bounces, capped, supported, done, st)``.
+        """
+        g = physics.gravity
+        dt = physics.dt
+        max_bounces = physics.max_bounces
+        done = int(0)
+        kind = int(1)  # 0 done, 1 a contact, 2 a support may start, 3 go on
+        box = int(-1)
+        n = vec3(ZERO, ZERO, ZERO)
+        contact = a
+        u = v
+        if pre_box >= 0 or st.mode == FREE and st.escape_box < 0 or st.mode == PLANE:
+            box = pre_box
+            s = pre_s
+            n = pre_n
+            if pre_box < 0:
+                box, s, n = nearest_hit_arc(a, v, st.g_eff, rest, r, boxes, broad)
+            if box < 0:
+                a = arc_point(a, v, st.g_eff, rest)
+                v = v + rest * st.g_eff
+                kind = 0
+            else:
+                contact = arc_contact_centre(a, v, st.g_eff, s, n, boxes.radius[box] + r,
+                                             boxes.extent[box])
+                u = v + s * st.g_eff
+                rest = wp.max(rest - s, ZERO)
+        else:
+            kind, box, n, contact, u, a, v, rest, st = held_leg(st, a, v, g, rest, r,
+                                                                boxes, broad)
+        if kind == 0:
+            done = 1
+        elif kind == 2:
+            holds, st_new, v_new, n_w = start_support(st, a, v, g, rest, r, boxes)
+            if holds == 0:
+                st = st_new
+            elif bounces >= max_bounces:
+                capped = 1
+                done = 1
+            else:
+                bounces += 1
+                supported += 1
+                on_contact.event(frame, sphere, st.box, 1, a, n_w, (dt - rest) / dt,
+                                 ZERO, events)
+                st = st_new
+                energy = energy - HALF * m * (wp.dot(v, v) - wp.dot(v_new, v_new))
+                v = v_new
+        elif kind == 1:
+            if bounces >= max_bounces:
+                capped = 1  # time left and a contact ahead: stay at the last contact
+                done = 1
+            else:
+                bounces += 1
+                L = on_contact.spin(L, u, n, r, m, physics)
+                un = wp.dot(u, n)
+                keep = on_contact.keep(physics)
+                held = int(0)
+                graze = int(0)
+                # a support: gravity presses and the normal speed is at most RESTING_SPEED
+                if wp.dot(g, n) < -TANGENT_REL * wp.length(g) and -un <= RESTING:
+                    held, graze, st, u_s = support_contact(st, u, n, un, contact, box,
+                                                           rest, r, g, boxes)
+                    if held == 1:
+                        supported += 1
+                        energy = energy - HALF * m * (wp.dot(u, u) - wp.dot(u_s, u_s))
+                        v = u_s
+                    elif graze == 1:
+                        v = u
+                if held == 0 and graze == 0:
+                    v = u - TWO * un * n
+                    if wp.static(features.lossy):
+                        energy = on_contact.loss(energy, m, contact, physics)
+                        v = v * keep
+                    if st.mode == CURVED:
+                        st.mode = FREE
+                        st.g_eff = g
+                    if st.supports > 0:
+                        speed = wp.length(v)
+                        leaves = wp.dot(v, st.n1) > TANGENT_REL * speed
+                        if st.supports == 2:
+                            leaves = leaves or wp.dot(v, st.n2) > TANGENT_REL * speed
+                        if leaves:  # off its support: the whole of gravity again
+                            st = free_support(g)
+                on_contact.event(frame, sphere, box, held, contact, n, (dt - rest) / dt,
+                                 -un, events)
+                a = contact
+        return a, v, L, energy, rest, bounces, capped, supported, done, st
+
+    @wp.func(inline=True)
     def ballistic_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
                        physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
                        sphere: int, events: EventBuffer):
@@ -157,256 +512,54 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
             normal kinetic energy a support removes; ``bounces`` counts the contacts taken
             (support starts included), ``capped`` is 1 when the cap stopped the sphere,
             ``supported`` counts the support contacts.
+
+        Free flight and plain bounces run here; supports, and what follows them, in
+        :func:`general_step`.
         """
         g = physics.gravity
-        g_len = wp.length(g)
         dt = physics.dt
         max_bounces = physics.max_bounces
         rest = dt  # time left in the frame [s]
-        g_eff = g  # gravity the sphere feels: its tangential part on a planar support
-        mode = int(FREE)
-        supports = int(0)  # planar supports (FACE: 1; PLANE: 1 to 3)
-        n1 = vec3(ZERO, ZERO, ZERO)
-        n2 = vec3(ZERO, ZERO, ZERO)
-        sup_box = int(-1)  # FACE, CURVED: the support's box
-        face_axis = int(0)  # FACE: the face's local normal axis and side
-        face_side = ONE
-        mask = vec3(ZERO, ZERO, ZERO)  # CURVED: the feature (slide.feature_of)
-        sig = vec3(ONE, ONE, ONE)
-        escape_box = int(-1)  # free flight just off this box's curved part ...
-        escape_left = ZERO  # ... which it cannot touch again for this long [s]
+        st = free_support(g)
         bounces = int(0)
         capped = int(0)
         supported = int(0)
         done = int(0)
         while done == 0:
-            have = int(0)  # a contact: box, its normal n, the centre and velocity there
-            start = int(0)  # a support may start on sup_box's feature (mask, sig) at a
-            box = int(-1)
-            n = vec3(ZERO, ZERO, ZERO)
-            contact = a
-            u = v
-            if mode == CURVED:
-                kind, s, a, v, mask, sig, hit_box, hit_n, n_sup = curved_leg(
-                    a, v, g, rest, r, boxes, broad, sup_box, mask, sig)
-                rest = wp.max(rest - s, ZERO)
-                if kind == LEG_END:
+            if st.mode == FREE and st.escape_box < 0:
+                box, s, n = nearest_hit_arc(a, v, g, rest, r, boxes, broad)
+                if box < 0:
+                    a = arc_point(a, v, g, rest)
+                    v = v + rest * g
                     done = 1
-                elif kind == LEG_DETACH:
-                    mode = FREE
-                    g_eff = g
-                    xl, vl, gl = box_frame(boxes, sup_box, a, v, g)
-                    escape_box = sup_box
-                    escape_left = escape_time(xl, vl, gl, rest, boxes.half_extents[sup_box],
-                                              boxes.radius[sup_box] + r, mask, sig)
-                elif kind == LEG_REGION:
-                    start = 1
-                else:
-                    have = 1
-                    box = hit_box
-                    n = hit_n
-                    contact = a
-                    u = v
-                    n1 = n_sup  # the curved support's tangent plane, for a crease
-            else:
-                tau = rest
-                skip = int(-1)
-                if escape_box >= 0:
-                    tau = wp.min(escape_left, rest)
-                    skip = escape_box
-                    escape_box = -1
-                s = tau
-                if skip >= 0:
-                    box, s, n = nearest_except(a, v, g_eff, tau, r, boxes, broad, skip)
-                else:
-                    box, s, n = nearest_hit_arc(a, v, g_eff, tau, r, boxes, broad)
-                s_exit = tau
-                exit_axis = int(-1)
-                exit_side = ONE
-                if mode == FACE:
-                    xl, vl, gl = box_frame(boxes, sup_box, a, v, g_eff)
-                    s_exit, exit_axis, exit_side = face_exit(
-                        xl, vl, gl, tau, boxes.half_extents[sup_box], face_axis)
-                if exit_axis >= 0 and s_exit < s:
-                    # the contact point leaves the face: the edge decides what follows
-                    a = arc_point(a, v, g_eff, s_exit)
-                    v = v + s_exit * g_eff
-                    rest = wp.max(rest - s_exit, ZERO)
-                    mask = vec3(ZERO, ZERO, ZERO)
-                    mask[face_axis] = ONE
-                    mask[exit_axis] = ONE
-                    sig = vec3(ONE, ONE, ONE)
-                    sig[face_axis] = face_side
-                    sig[exit_axis] = exit_side
-                    start = 1
-                elif box < 0:
-                    a = arc_point(a, v, g_eff, tau)
-                    v = v + tau * g_eff
-                    if tau >= rest:
-                        done = 1
-                    rest = wp.max(rest - tau, ZERO)
-                else:
-                    have = 1
-                    contact = arc_contact_centre(a, v, g_eff, s, n, boxes.radius[box] + r,
-                                                 boxes.extent[box])
-                    u = v + s * g_eff
-                    rest = wp.max(rest - s, ZERO)
-            if start == 1:
-                # a support starts on the feature the centre reached, if anything presses it
-                xl, vl, gl = box_frame(boxes, sup_box, a, v, g)
-                h = boxes.half_extents[sup_box]
-                big_r = boxes.radius[sup_box] + r
-                count = int(mask[0] + mask[1] + mask[2])
-                holds = int(0)
-                n_w = vec3(ZERO, ZERO, ZERO)
-                axis = int(0)
-                if count == 1:
-                    axis, side = dominant_axis(mask)
-                    n_l = vec3(ZERO, ZERO, ZERO)
-                    n_l[axis] = sig[axis]
-                    n_w = boxes.rotation[sup_box] * n_l
-                    if wp.dot(g, n_w) < -TANGENT_REL * g_len:
-                        holds = 1
-                else:
-                    holds = holds_on(xl, vl, gl, h, big_r, mask, sig)
-                    cf = wp.cw_mul(mask, wp.cw_mul(sig, h))
-                    n_w = boxes.rotation[sup_box] * wp.normalize(wp.cw_mul(mask, xl - cf))
-                if holds == 0:
-                    mode = FREE
-                    g_eff = g
-                    supports = 0
-                    if count > 1:
-                        escape_box = sup_box
-                        escape_left = escape_time(xl, vl, gl, rest, h, big_r, mask, sig)
                 elif bounces >= max_bounces:
-                    capped = 1
-                    done = 1
-                else:
-                    bounces += 1
-                    supported += 1
-                    on_contact.event(frame, sphere, sup_box, 1, a, n_w, (dt - rest) / dt,
-                                     ZERO, events)
-                    if count == 1:
-                        mode = FACE
-                        face_axis = axis
-                        face_side = sig[axis]
-                        supports = 1
-                        n1 = n_w
-                        g_eff = along_plane(g, n_w)
-                        v_sq = wp.dot(v, v)
-                        v = along_plane(v, n_w)
-                        energy = energy - HALF * m * (v_sq - wp.dot(v, v))
-                    else:
-                        mode = CURVED
-                        supports = 0
-                        g_eff = g
-            if have == 1:
-                if bounces >= max_bounces:
                     capped = 1  # time left and a contact ahead: stay at the last contact
                     done = 1
                 else:
-                    bounces += 1
-                    L = on_contact.spin(L, u, n, r, m, physics)
+                    u = v + s * g
                     un = wp.dot(u, n)
-                    gn = wp.dot(g, n)
-                    keep = on_contact.keep(physics)
-                    # a support: gravity presses and the normal speed is at most RESTING_SPEED
-                    resting = gn < -TANGENT_REL * g_len and -un <= RESTING
-                    kind_flag = int(0)
-                    single = int(0)
-                    if resting:
-                        if mode == CURVED:
-                            supports = 1  # its tangent plane (n1) against this new support
-                        if supports == 0 or (supports == 1 and wp.dot(n, n1) >= COPLANAR):
-                            single = 1
-                        elif supports == 1:
-                            if wp.dot(along_plane(g, n), n1) >= ZERO and wp.dot(
-                                    along_plane(u, n), n1) >= ZERO:
-                                single = 1  # sliding off the old plane onto the new one
-                    graze = int(0)
-                    count = int(0)
-                    f_mask = vec3(ZERO, ZERO, ZERO)
-                    f_sig = vec3(ONE, ONE, ONE)
-                    xl = vec3(ZERO, ZERO, ZERO)
-                    vl = vec3(ZERO, ZERO, ZERO)
-                    gl = vec3(ZERO, ZERO, ZERO)
-                    h = boxes.half_extents[box]
-                    big_r = boxes.radius[box] + r
-                    if single == 1:
-                        xl, vl, gl = box_frame(boxes, box, contact, u, g)
-                        f_mask, f_sig, count = feature_of(xl, h, big_r)
-                        if count > 1:
-                            if holds_on(xl, vl, gl, h, big_r, f_mask, f_sig) == 0:
-                                # a curved part that cannot hold it: a tangent touch (within
-                                # the sweep's resolution of a double root) flies on, else a
-                                # bounce
-                                resting = False
-                                if -un <= TOUCH * wp.length(u):
-                                    graze = 1
-                    if graze == 1:
-                        mode = FREE
-                        supports = 0
-                        g_eff = g
-                        v = u
-                        escape_box = box
-                        escape_left = escape_time(xl, vl, gl, rest, h, big_r, f_mask, f_sig)
-                    elif resting:
-                        u_sq = wp.dot(u, u)
-                        u = along_plane(u, n)
-                        if single == 1:
-                            if count <= 1:
-                                kind_flag = 1
-                                mode = FACE
-                                sup_box = box
-                                face_axis, face_side = dominant_axis(
-                                    wp.transpose(boxes.rotation[box]) * n)
-                                supports = 1
-                                n1 = n
-                                g_eff = along_plane(g, n)
-                            else:
-                                kind_flag = 1
-                                mode = CURVED
-                                sup_box = box
-                                mask = f_mask
-                                sig = f_sig
-                                supports = 0
-                                g_eff = g
-                        elif supports == 1:  # along the crease of the two planes
-                            kind_flag = 1
-                            mode = PLANE
-                            supports = 2
-                            n2 = n
-                            crease = wp.normalize(wp.cross(n1, n2))
-                            g_eff = wp.dot(g, crease) * crease
-                            u = wp.dot(u, crease) * crease
-                        else:  # wedged by three supports
-                            kind_flag = 1
-                            mode = PLANE
-                            g_eff = vec3(ZERO, ZERO, ZERO)
-                            u = vec3(ZERO, ZERO, ZERO)
-                        supported += kind_flag
-                        energy = energy - HALF * m * (u_sq - wp.dot(u, u))
-                        v = u
-                    else:
+                    if wp.dot(g, n) < -TANGENT_REL * wp.length(g) and -un <= RESTING:
+                        a, v, L, energy, rest, bounces, capped, supported, done, st = (
+                            general_step(st, a, v, L, energy, rest, bounces, capped,
+                                         supported, r, m, physics, boxes, broad, frame, sphere,
+                                         events, box, s, n))
+                    else:  # a bounce
+                        bounces += 1
+                        contact = arc_contact_centre(a, v, g, s, n, boxes.radius[box] + r,
+                                                     boxes.extent[box])
+                        rest = wp.max(rest - s, ZERO)
+                        L = on_contact.spin(L, u, n, r, m, physics)
                         v = u - TWO * un * n
                         if wp.static(features.lossy):
                             energy = on_contact.loss(energy, m, contact, physics)
-                            v = v * keep
-                        if mode == CURVED:
-                            mode = FREE
-                            g_eff = g
-                        if supports > 0:
-                            speed = wp.length(v)
-                            leaves = wp.dot(v, n1) > TANGENT_REL * speed
-                            if supports == 2:
-                                leaves = leaves or wp.dot(v, n2) > TANGENT_REL * speed
-                            if leaves:  # off its support: the whole of gravity again
-                                supports = 0
-                                mode = FREE
-                                g_eff = g
-                    on_contact.event(frame, sphere, box, kind_flag, contact, n,
-                                     (dt - rest) / dt, -un, events)
-                    a = contact
+                            v = v * on_contact.keep(physics)
+                        on_contact.event(frame, sphere, box, 0, contact, n, (dt - rest) / dt,
+                                         -un, events)
+                        a = contact
+            else:
+                a, v, L, energy, rest, bounces, capped, supported, done, st = general_step(
+                    st, a, v, L, energy, rest, bounces, capped, supported, r, m, physics, boxes,
+                    broad, frame, sphere, events, -1, ZERO, vec3(ZERO, ZERO, ZERO))
         return a, v, L, energy, bounces, capped, supported
 
     return SimpleNamespace(ballistic_path=ballistic_path)

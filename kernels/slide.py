@@ -27,6 +27,10 @@ substep's ends. Event times are refined inside their substep (regula falsi with 
 ``REFINE_ULPS`` of the leg. The error is that of the substeps: ``(Omega h)^4`` relative per
 unit angle, ``Omega`` the feature's natural rate.
 
+The rare paths (a face's exit, a feature, a curved leg, an escape) are compiled out of line
+(``inline=False``): inlined, they made the bounce loop around the nearest-hit query twice as
+slow for spheres that never slide.
+
 After a curved support ends in free flight the free parabola starts tangent to the box it
 leaves; the exact sweep's start rules (made for a plane) would take it as a new contact at
 once. :func:`escape_time` gives how long that parabola provably stays off the box (until it
@@ -123,7 +127,7 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
                     out = r2
         return out
 
-    @wp.func
+    @wp.func(inline=False)
     def face_exit(x: vec3, v: vec3, g: vec3, tau: scalar, h: vec3, axis: int):
         """When the contact point of a face slide leaves the face, box frame.
 
@@ -152,7 +156,7 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
                     side = -ONE
         return s, exit_axis, side
 
-    @wp.func
+    @wp.func(inline=False)
     def feature_of(x: vec3, h: vec3, radius: scalar):
         """The feature of a point on a rounded box's surface, box frame: ``(mask, sig,
         count)``, the constrained axes (outside the core slab by more than ``FACE_BORDER_ULPS``
@@ -259,7 +263,7 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
                     side = -1
         return lo
 
-    @wp.func
+    @wp.func(inline=False)
     def escape_time(x: vec3, v: vec3, g: vec3, tau: scalar, h: vec3, radius: scalar,
                     mask: vec3, sig: vec3):
         """How long [s] the free parabola from a tangential start on a curved feature stays
@@ -292,7 +296,7 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
             out = HALF * window
         return out
 
-    @wp.func
+    @wp.func(inline=False)
     def nearest_except(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, boxes: Boxes,
                        broad: BroadPhase, skip: int):
         """First contact of the arc ``a + v s + 1/2 g s^2``, ``s`` in ``[0, tau]``, over every
@@ -316,7 +320,7 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
                     best, best_s, best_n = candidate(q, boxes, k, best, best_s, best_n)
         return best, best_s, best_n
 
-    @wp.func
+    @wp.func(inline=False)
     def curved_leg(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, boxes: Boxes,
                    broad: BroadPhase, box: int, mask: vec3, sig: vec3):
         """Slide on the curved feature ``(mask, sig)`` of ``box`` for at most ``tau`` [s].
