@@ -44,6 +44,8 @@ class Features:
         lossy: ``energy_retention < 1``: the loss at each bounce.
         energy_correction: the frame kernel resets the speed from the energy after the move.
         events: write every contact into the launch's event buffer.
+        births: some sphere is born after frame 0: the frame kernel skips each sphere's frames
+            before its ``birth_frame`` (no move, no contact, no count).
 
     ``motion`` and ``broad_phase`` may be any ``str`` (an enumeration of ``str`` included):
     they compare and hash as their text.
@@ -56,6 +58,7 @@ class Features:
     lossy: bool = False
     energy_correction: bool = False
     events: bool = False
+    births: bool = False
 
     def __post_init__(self):
         for name, allowed in (("precision", PRECISIONS), ("motion", MOTIONS),
@@ -63,7 +66,7 @@ class Features:
             value = getattr(self, name)
             if not isinstance(value, str) or value not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
-        for name in ("spin", "lossy", "energy_correction", "events"):
+        for name in ("spin", "lossy", "energy_correction", "events", "births"):
             object.__setattr__(self, name, bool(getattr(self, name)))
 
     def but(self, **changes) -> "Features":

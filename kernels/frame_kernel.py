@@ -51,11 +51,16 @@ def frame_kernel(features: Features):
             (``bounce.bounce_path``), or ``"ballistic"``, the exact parabola
             (``ballistic.ballistic_path``); the state's velocity is the true one at the frame's
             end for both. A linear kernel contains no ballistic code and vice versa.
+            ``births``: sphere ``i`` takes the step into absolute frame ``k`` only when ``k >
+            birth_frame[i]`` (its state is the one at its birth until then, and the frames it
+            takes are the arithmetic of a run started at its birth); without it
+            ``birth_frame`` is never read.
 
     Kernel parameters beyond the model structs, the sphere constants and the state:
         frame_count: frames this launch advances (>= 0).
         record_every: record one frame in this many and the launch's last one (0: none).
         sphere_offset: index of the launch's first sphere in the swarm (event rows name it).
+        first_frame: absolute frame of the state the launch starts from (births compare it).
         record_position_out, record_orientation_out: (records, N) centres [m] and orientations.
         record_velocity_out, record_angular_velocity_out: (records, N) velocity at the
             recorded frame [m/s] (the state's) and world angular velocity ``Rot`` [rad/s];
@@ -66,6 +71,7 @@ def frame_kernel(features: Features):
     scalar, vec3, quat = p.scalar, p.vec3, p.quat
     Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
     spin, energy_correction = features.spin, features.energy_correction
+    births = features.births
     motion = features.motion
     if motion == "ballistic":
         path = ballistic_funcs(features).ballistic_path
@@ -153,9 +159,11 @@ def frame_kernel(features: Features):
         physics: Physics,
         radius: wp.array[scalar],
         mass: wp.array[scalar],
+        birth_frame: wp.array[wp.int32],
         frame_count: int,
         record_every: int,
         sphere_offset: int,
+        first_frame: int,
         # In:
         position_in: wp.array[vec3],
         velocity_in: wp.array[vec3],
@@ -192,11 +200,21 @@ def frame_kernel(features: Features):
         capped = int(0)
         row = int(0)
         with_motion = record_velocity_out.shape[0] > 0
+        born = int(0)
+        if wp.static(births):
+            born = birth_frame[i] - first_frame  # frames of this launch before its birth
         for f in range(frame_count):
-            x, v, L, o, energy, b, c = one_frame(x, v, L, o, energy, r, m, physics, boxes, broad,
-                                                 f + 1, sphere, events_out)
-            bounces += b
-            capped += c
+            if wp.static(births):
+                if f >= born:
+                    x, v, L, o, energy, b, c = one_frame(x, v, L, o, energy, r, m, physics,
+                                                         boxes, broad, f + 1, sphere, events_out)
+                    bounces += b
+                    capped += c
+            else:
+                x, v, L, o, energy, b, c = one_frame(x, v, L, o, energy, r, m, physics, boxes,
+                                                     broad, f + 1, sphere, events_out)
+                bounces += b
+                capped += c
             if record_every > 0:
                 if (f + 1) % record_every == 0 or f + 1 == frame_count:
                     record_position_out[row, i] = x

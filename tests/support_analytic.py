@@ -39,6 +39,10 @@ QUAD_MAX_DEPTH = 40
 #: Newton iterations allowed to invert t(q) (safeguarded; converges in under ten).
 NEWTON_MAX_ITER = 100
 
+#: A speed across the axis below this fraction of the slide's speed scale (``sqrt(G R)`` plus
+#: the start's speed) is rounding: a start at rest across the axis.
+ROUNDING_SPEED_REL = 1e-14
+
 _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(20)
 
 
@@ -202,6 +206,8 @@ def cylinder_slide(axis_point, axis, R: float, x0, v0, g, t0: float = 0.0,
     psi0 = float(np.arctan2(radial @ side, radial @ up))
     v_axis = float(v0 @ a)
     omega = float((v0 - v_axis * a) @ (np.cos(psi0) * side - np.sin(psi0) * up)) / R
+    if abs(omega) * R <= ROUNDING_SPEED_REL * (np.sqrt(G * R) + float(np.linalg.norm(v0))):
+        omega = 0.0  # a start at rest across the axis, but for rounding: it goes downhill
     sign = 1.0 if omega > 0.0 or (omega == 0.0 and psi0 >= 0.0) else -1.0
     # mirror so that psi increases: q = sign * psi
     q0, w = sign * psi0, abs(omega)

@@ -98,8 +98,11 @@ class Scene:
         """
         return cls(**read_scene_file(name_or_path))
 
-    def spawn(self, n: int | None = None, seed: int | None = None):
+    def spawn(self, n: int | None = None, seed: int | None = None, dt: float | None = None):
         """The swarm of this scene's emitter: ``n`` spheres (default: the emitter's count).
+
+        ``dt`` [s] (None: the scene's) is the frame duration the birth frames of an emitter
+        that emits over time are counted in (``Emitter.birth_frames``).
 
         Returns:
             A :class:`warpsim.Swarm`; the same ``seed`` gives the same swarm. No sphere starts
@@ -117,7 +120,10 @@ class Scene:
         if seed is not None:
             check.positive_int("seed", seed, minimum=0)
         try:
-            swarm = self.emitter.spawn(self.boxes, n=n, seed=seed)
+            # an emitter of births counts them in frames of dt; any other needs no dt
+            timing = ({"dt": self.dt if dt is None else dt}
+                      if getattr(self.emitter, "emits_over_time", False) else {})
+            swarm = self.emitter.spawn(self.boxes, n=n, seed=seed, **timing)
             feasibility.check_outside(self.boxes, swarm.position, swarm.radius, "float64")
         except ValueError as exc:
             if self.source is None:
