@@ -132,7 +132,7 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                 on_contact.event(frame, sphere, box, int(resting), contact, n,
                                  (dt - rest) / dt, -un, events)
                 if resting:
-                    supported = 1
+                    supported += 1
                     u_sq = wp.dot(u, u)
                     if supports == 0 or (supports == 1 and wp.dot(n, n1) >= COPLANAR):
                         supports = 1

@@ -100,6 +100,12 @@ def model_structs(p: Precision) -> ModelStructs:
         extent: wp.array[vec3]
         """Half sizes of each rounded box's world-axis-aligned bounding box [m], shape (K,), for
         the cheap per-box reject."""
+        lower: vec3
+        """Lowest corner [m] of a world box holding every box's reject bounds (``center -
+        extent (1 + REJECT_SLACK)``), rounded outward; without boxes above ``upper`` (empty)."""
+        upper: vec3
+        """Highest corner [m] of that box: a path whose bounds lie beyond it on one axis meets
+        no box (the frame kernel's free-flight step)."""
 
     @wp.struct
     class BroadPhase:

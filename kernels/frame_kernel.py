@@ -20,8 +20,10 @@ from functools import cache
 
 import warp as wp
 
+from .arc import arc_funcs
 from .ballistic import ballistic_funcs
 from .bounce import bounce_funcs
+from .candidates import BOUNDS_PAD_REL, REJECT_SLACK
 from .data import Features, model_structs
 from .dynamics import RESET_ULPS, dynamics_funcs
 from .precision import precision
@@ -78,10 +80,33 @@ def frame_kernel(features: Features):
     rotation_vector = dyn.rotation_vector
     inertia = dyn.inertia
     integrate_orientation = dyn.integrate_orientation
+    arc_point = arc_funcs(p).arc_point
     ZERO = scalar(0.0)
+    HALF = scalar(0.5)
+    EIGHTH = scalar(0.125)
     RESET_SLACK = scalar(RESET_ULPS * p.eps)
+    SLACK = scalar(1.0 + REJECT_SLACK)
+    PAD_REL = scalar(BOUNDS_PAD_REL)
 
-    @wp.func
+    @wp.func(inline=True)
+    def clear_of_boxes(a: vec3, d: vec3, grow: vec3, lower: vec3, upper: vec3):
+        """1 when the path from ``a`` [m] along the chord ``d`` [m], its bounds grown by
+        ``grow`` [m] per axis, lies beyond ``lower`` / ``upper`` [m] (``Boxes.lower``,
+        ``Boxes.upper``, plain values: no struct is copied) on some axis: then
+        every box's reject (``candidates.bounds_funcs``' ``apart``) refuses it and the candidate
+        loop would find nothing, whatever the broad phase. The path side is padded by
+        ``BOUNDS_PAD_REL`` of its coordinates (the reject's rounding of the path; the box side
+        is padded on the host), so the answer 1 is never wrong; 0 only means "look".
+        """
+        out = int(0)
+        for i in range(3):
+            e = a[i] + d[i]
+            reach = grow[i] * SLACK + PAD_REL * (wp.abs(a[i]) + wp.abs(d[i]) + grow[i])
+            if wp.max(a[i], e) + reach < lower[i] or wp.min(a[i], e) - reach > upper[i]:
+                out = 1
+        return out
+
+    @wp.func(inline=True)
     def linear_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
                      physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
                      events: EventBuffer):
@@ -93,9 +118,21 @@ def frame_kernel(features: Features):
         """
         gravity = physics.gravity
         origin = physics.origin
-        x, v, L, energy, bounces, capped, supported = path(x, v, r, m, L, energy, physics, boxes,
-                                                          broad, frame, sphere, events)
-        if supported == 1:
+        bounces = int(0)
+        capped = int(0)
+        supports = int(0)
+        # free flight when the frame's chord meets no box's bounds: the bounce loop's own
+        # arithmetic for a frame without contact (``bounce.bounce_path``), without its call
+        half_kick = gravity * (HALF * physics.dt)
+        w = v + half_kick
+        d = w * physics.dt
+        if clear_of_boxes(x, d, vec3(r, r, r), boxes.lower, boxes.upper) == 1:
+            x = x + d
+            v = w + half_kick
+        else:
+            x, v, L, energy, bounces, capped, supports = path(x, v, r, m, L, energy, physics,
+                                                              boxes, broad, frame, sphere, events)
+        if supports > 0:
             # a resting contact is inelastic: keep the state and take its energy when that is
             # lower by more than rounding; never more: a state above E (rounding on a long
             # slide) has its speed scaled down, along the surface it slides on
@@ -118,9 +155,9 @@ def frame_kernel(features: Features):
         if wp.static(spin):
             rot = rotation_vector(L, inertia(m, r), physics.max_rot)
             o = integrate_orientation(o, rot, physics.dt)
-        return x, v, L, o, energy, bounces, capped
+        return x, v, L, o, energy, bounces, capped, supports
 
-    @wp.func
+    @wp.func(inline=True)
     def ballistic_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar,
                         m: scalar, physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
                         sphere: int, events: EventBuffer):
@@ -132,8 +169,22 @@ def frame_kernel(features: Features):
         """
         gravity = physics.gravity
         origin = physics.origin
-        x, v, L, energy, bounces, capped, supported = path(x, v, r, m, L, energy, physics, boxes,
-                                                          broad, frame, sphere, events)
+        dt = physics.dt
+        bounces = int(0)
+        capped = int(0)
+        supports = int(0)
+        # free flight when the frame's arc meets no box's bounds (its chord's, grown by the
+        # sagitta, as ``nearest_arc.arc_path``): the ballistic loop's step without contact
+        k = EIGHTH * dt * dt
+        sag = vec3(wp.abs(gravity[0]) * k + r, wp.abs(gravity[1]) * k + r,
+                   wp.abs(gravity[2]) * k + r)
+        if clear_of_boxes(x, dt * (v + (HALF * dt) * gravity), sag, boxes.lower,
+                          boxes.upper) == 1:
+            x = arc_point(x, v, gravity, dt)
+            v = v + dt * gravity
+        else:
+            x, v, L, energy, bounces, capped, supports = path(x, v, r, m, L, energy, physics,
+                                                              boxes, broad, frame, sphere, events)
         if wp.static(energy_correction):
             v = energy_along_gravity(v, energy, m, gravity, x, origin, 1)
         else:
@@ -141,7 +192,7 @@ def frame_kernel(features: Features):
         if wp.static(spin):
             rot = rotation_vector(L, inertia(m, r), physics.max_rot)
             o = integrate_orientation(o, rot, physics.dt)
-        return x, v, L, o, energy, bounces, capped
+        return x, v, L, o, energy, bounces, capped, supports
 
     one_frame = ballistic_frame if motion == "ballistic" else linear_frame
 
@@ -169,6 +220,7 @@ def frame_kernel(features: Features):
         angular_momentum_out: wp.array[vec3],
         orientation_out: wp.array[quat],
         bounce_count_out: wp.array[wp.int32],
+        support_count_out: wp.array[wp.int32],
         capped_count_out: wp.array[wp.int32],
         record_position_out: wp.array2d[vec3],
         record_orientation_out: wp.array2d[quat],
@@ -189,13 +241,15 @@ def frame_kernel(features: Features):
             L = angular_momentum_in[i]
             o = orientation_in[i]
         bounces = int(0)
+        supports = int(0)
         capped = int(0)
         row = int(0)
         with_motion = record_velocity_out.shape[0] > 0
         for f in range(frame_count):
-            x, v, L, o, energy, b, c = one_frame(x, v, L, o, energy, r, m, physics, boxes, broad,
-                                                 f + 1, sphere, events_out)
-            bounces += b
+            x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m, physics, boxes,
+                                                    broad, f + 1, sphere, events_out)
+            bounces += b - s
+            supports += s
             capped += c
             if record_every > 0:
                 if (f + 1) % record_every == 0 or f + 1 == frame_count:
@@ -219,6 +273,7 @@ def frame_kernel(features: Features):
             angular_momentum_out[i] = L
             orientation_out[i] = o
         bounce_count_out[i] += bounces
+        support_count_out[i] += supports
         capped_count_out[i] += capped
 
     return advance_frames

@@ -54,7 +54,10 @@ class Stats:
 
     Attributes:
         frames: frames advanced. sphere_frames: frames times spheres.
-        bounces: contacts taken, all spheres (resting contacts on a support included).
+        bounces: bounces taken, all spheres (contacts that reflect; resting contacts are in
+            ``supports``).
+        supports: resting or sliding contacts on a support, all spheres (a sphere at rest on
+            a floor makes about one a frame).
         capped: sphere-frames stopped by ``max_bounces``.
         capped_spheres: spheres stopped by the cap at least once.
         seconds: wall time spent in :meth:`Simulator.step` and :meth:`Simulator.run` [s].
@@ -73,6 +76,12 @@ class Stats:
     seconds: float
     broad_phase: str = ""
     requested_broad_phase: str = ""
+    supports: int = 0
+
+    @property
+    def contacts(self) -> int:
+        """Contacts of every kind: ``bounces + supports``."""
+        return self.bounces + self.supports
 
     @property
     def sphere_frames_per_second(self) -> float:
@@ -226,8 +235,10 @@ class Simulator:
         self.state_1 = self.state_0.empty_like(share=unwritten)
         """The state the next launch writes; swapped with :attr:`state_0` after it."""
         self.counters = {"bounce_count_out": wp.zeros(self._n, dtype=wp.int32, device=dev),
+                         "support_count_out": wp.zeros(self._n, dtype=wp.int32, device=dev),
                          "capped_count_out": wp.zeros(self._n, dtype=wp.int32, device=dev)}
-        """Per-sphere counters the kernel adds to (contacts taken, sphere-frames capped)."""
+        """Per-sphere counters the kernel adds to (bounces, resting contacts, sphere-frames
+        capped)."""
         self._initial_energy = energy
 
     def _arguments(self, kernel, rows: slice | None, values: dict, records: dict,
@@ -545,11 +556,13 @@ class Simulator:
 
     @property
     def stats(self) -> Stats:
-        """Bounce and cap counters since the start, and the time spent stepping."""
+        """Bounce, support and cap counters since the start, and the time spent stepping."""
         capped = self.counters["capped_count_out"].numpy()
         bounces = self.counters["bounce_count_out"].numpy()
+        supports = self.counters["support_count_out"].numpy()
         return Stats(frames=self.frame, sphere_frames=self.frame * self._n,
                      bounces=int(bounces.astype(np.int64).sum()),
+                     supports=int(supports.astype(np.int64).sum()),
                      capped=int(capped.astype(np.int64).sum()),
                      capped_spheres=int(np.count_nonzero(capped)), seconds=self._seconds,
                      broad_phase=self.broad_phase,

@@ -138,8 +138,10 @@ def shard_swarm(scene: Scene, n: int | None, seed: int | None, start: int, stop:
     if start % block or (stop % block and stop != n):
         raise ValueError(f"spheres {start}..{stop} are not whole blocks of {block} (a shard "
                          f"starts and ends on a multiple of block, or ends at n = {n})")
-    parts = [spawn_block(scene, n, seed, b, block) for b in range(start // block,
-                                                                   block_count(stop, block))]
+    # the blocks drawn together (each as spawn_block draws it, bit for bit)
+    blocks = range(start // block, block_count(stop, block))
+    parts = scene.spawn_many([min(block, n - b * block) for b in blocks],
+                             [block_seed(seed, b) for b in blocks])
     return _joined(parts)
 
 
