@@ -12,6 +12,13 @@ reset is the identity there (to rounding) and only corrects what contacts and ro
 Resetting the mean velocity from ``E`` instead (the sheet's literal rule) would not be the
 identity in free flight: every flight would be disturbed, every frame.
 
+Free flight (``Features.free_flight``): a frame whose path (the chord, or the arc's chord grown
+by its sagitta, grown by the sphere) lies beyond the box holding every box's reject bounds
+(``Boxes.lower`` / ``Boxes.upper``) cannot meet a box, so it takes the bounce loop's own
+no-contact step inline (the same arithmetic, the same bits) instead of calling the loop and its
+broad phase. Built only for swarms that start beyond those bounds: in a closed room the test
+would only cost time (it measured 1.18x the float32 frame there).
+
 Variants come from :func:`frame_kernel`, keyed by what the scene needs, so a
 scene without spin runs a kernel with no spin code in it.
 """
@@ -53,6 +60,8 @@ def frame_kernel(features: Features):
             (``bounce.bounce_path``), or ``"ballistic"``, the exact parabola
             (``ballistic.ballistic_path``); the state's velocity is the true one at the frame's
             end for both. A linear kernel contains no ballistic code and vice versa.
+            ``free_flight``: test each frame's path against the boxes' overall bounds first
+            and take the free step inline when it lies beyond them (module docstring).
 
     Kernel parameters beyond the model structs, the sphere constants and the state:
         frame_count: frames this launch advances (>= 0).
@@ -63,11 +72,15 @@ def frame_kernel(features: Features):
             recorded frame [m/s] (the state's) and world angular velocity ``Rot`` [rad/s];
             written only when the arrays have rows (a (0, N) array skips them).
         events_out: the event buffer; an event's frame is the frame within the launch, from 1.
+        bounce_count_out, support_count_out, capped_count_out: per-sphere counters added to:
+            bounces (contacts that reflect), resting or sliding contacts on a support, and
+            frames stopped by the cap.
     """
     p = precision(features.precision)
     scalar, vec3, quat = p.scalar, p.vec3, p.quat
     Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
     spin, energy_correction = features.spin, features.energy_correction
+    free_flight = features.free_flight
     motion = features.motion
     if motion == "ballistic":
         path = ballistic_funcs(features).ballistic_path
@@ -126,7 +139,10 @@ def frame_kernel(features: Features):
         half_kick = gravity * (HALF * physics.dt)
         w = v + half_kick
         d = w * physics.dt
-        if clear_of_boxes(x, d, vec3(r, r, r), boxes.lower, boxes.upper) == 1:
+        clear = int(0)
+        if wp.static(free_flight):
+            clear = clear_of_boxes(x, d, vec3(r, r, r), boxes.lower, boxes.upper)
+        if clear == 1:
             x = x + d
             v = w + half_kick
         else:
@@ -178,8 +194,11 @@ def frame_kernel(features: Features):
         k = EIGHTH * dt * dt
         sag = vec3(wp.abs(gravity[0]) * k + r, wp.abs(gravity[1]) * k + r,
                    wp.abs(gravity[2]) * k + r)
-        if clear_of_boxes(x, dt * (v + (HALF * dt) * gravity), sag, boxes.lower,
-                          boxes.upper) == 1:
+        clear = int(0)
+        if wp.static(free_flight):
+            clear = clear_of_boxes(x, dt * (v + (HALF * dt) * gravity), sag, boxes.lower,
+                                   boxes.upper)
+        if clear == 1:
             x = arc_point(x, v, gravity, dt)
             v = v + dt * gravity
         else:

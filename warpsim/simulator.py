@@ -14,7 +14,7 @@ import warp as wp
 from . import broad_phase as broad
 from . import feasibility
 from . import validation as check
-from .device import resolve_device
+from .device import bvh_bounds, resolve_device
 from .kernels import precision as fp
 from .kernels.data import Features
 from .kernels.frame_kernel import frame_kernel
@@ -197,7 +197,8 @@ class Simulator:
         self._features = Features(precision=self.precision, motion=self.motion,
                                   broad_phase=self.broad_phase, spin=self.spin,
                                   lossy=scene.energy_retention < 1.0,
-                                  energy_correction=self.energy_correction)
+                                  energy_correction=self.energy_correction,
+                                  free_flight=_starts_in_free_flight(scene.boxes, swarm))
         self._kernel = frame_kernel(self._features)
         self._upload(swarm)
         self._shards = _shards(self._n, self.workers)
@@ -579,6 +580,20 @@ def _energy_origin(scene: Scene, swarm: Swarm) -> np.ndarray:
     if len(pts) == 0:
         return np.zeros(3)
     return 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+
+
+def _starts_in_free_flight(boxes, swarm: Swarm) -> bool:
+    """Whether some sphere starts beyond the box holding every obstacle's reject bounds (the
+    device model's ``Boxes.lower`` / ``upper``): then the kernel is built with the free-flight
+    step (the same bits either way). Spheres that start inside it, as in a closed room, stay
+    near the boxes, and the step's test would only cost them time."""
+    if len(boxes) == 0 or len(swarm) == 0:
+        return False
+    lower, upper = bvh_bounds(boxes.center, boxes.world_extent())
+    r = swarm.radius[:, None]
+    beyond = ((swarm.position - r > upper.max(axis=0))
+              | (swarm.position + r < lower.min(axis=0)))
+    return bool(beyond.any())
 
 
 def _host(array: wp.array) -> np.ndarray:
