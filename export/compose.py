@@ -76,7 +76,17 @@ def over_set(layer: Sdf.Layer, stage_set, output, instancer: str) -> Sdf.Layer:
     out.subLayerPaths.append(asset)
     out.pseudoRoot.SetInfo(UsdGeom.Tokens.upAxis, stage_set.up_axis)
     out.pseudoRoot.SetInfo(UsdGeom.Tokens.metersPerUnit, float(stage_set.meters_per_unit))
-    spheres = out.GetPrimAtPath(instancer)
+    in_set_units(out.GetPrimAtPath(instancer), stage_set)
+    out.documentation = (f"{layer.documentation} Composed over {asset} "
+                         f"({stage_set.up_axis} up, {stage_set.meters_per_unit:g} m per unit): "
+                         f"sphere positions and radii in metres, scaled to the set's units.")
+    return out
+
+
+def in_set_units(spheres: Sdf.PrimSpec, stage_set) -> None:
+    """Give the spheres' prim (an instancer, or the ``Xform`` over a sharded run's instancers)
+    the transform that maps its metres onto the set's units in the stage's world frame:
+    ``[!resetXformStack!, xformOp:scale, ...its own ops]``."""
     scale = 1.0 / float(stage_set.meters_per_unit)
     op = Sdf.AttributeSpec(spheres, "xformOp:scale", Sdf.ValueTypeNames.Double3)
     op.default = Gf.Vec3d(scale, scale, scale)
@@ -86,7 +96,3 @@ def over_set(layer: Sdf.Layer, stage_set, output, instancer: str) -> Sdf.Layer:
         order = Sdf.AttributeSpec(spheres, "xformOpOrder", Sdf.ValueTypeNames.TokenArray,
                                   Sdf.VariabilityUniform)
     order.default = Vt.TokenArray([RESET_XFORM_STACK, "xformOp:scale", *inner])
-    out.documentation = (f"{layer.documentation} Composed over {asset} "
-                         f"({stage_set.up_axis} up, {stage_set.meters_per_unit:g} m per unit): "
-                         f"sphere positions and radii in metres, scaled to the set's units.")
-    return out

@@ -50,6 +50,7 @@ import numpy as np
 from pxr import Sdf, Tf, Vt
 
 from ..trajectory import Trajectory
+from .compose import in_set_units, set_asset_path
 from .files import atomic_output
 from .usd_read import (  # the readers live with read_usd, which reads sharded roots too
     SHARD_PREFIX,
@@ -61,8 +62,10 @@ from .usd_write import (
     PROTOTYPE,
     SPHERES,
     WORLD,
+    born_stand_ins,
     export_layer,
     half_orientations,
+    hidden_ids,
     write_usd,
 )
 
@@ -163,6 +166,8 @@ def write_shard_layer(path, trajectory: Trajectory, ids, index: int, count: int,
                          f"{trajectory.position.shape}")
     if velocities and (trajectory.velocity is None or trajectory.angular_velocity is None):
         raise ValueError("velocities=True but the trajectory has no velocity")
+    births = trajectory.birth_frame
+    trajectory = born_stand_ins(trajectory)
     position, orientation, velocity, angular = _stored(trajectory, velocities)
     radius = np.asarray(trajectory.radius, dtype=np.float64)
     digest = array_digest(frames, ids, position, orientation, velocity, angular)
@@ -192,13 +197,24 @@ def write_shard_layer(path, trajectory: Trajectory, ids, index: int, count: int,
         attrs = {"positions": _attribute(inst, "positions", T.Point3fArray),
                  "orientationsf": _attribute(inst, "orientationsf", T.QuatfArray),
                  "orientations": _attribute(inst, "orientations", T.QuathArray)}
+        if births is not None:
+            births = np.asarray(births, dtype=np.int64)
+            _attribute(inst, "warpsim:birthFrame", T.Int64Array,
+                       Vt.Int64Array.FromNumpy(births), custom=True)
+            attrs["invisibleIds"] = _attribute(inst, "invisibleIds", T.Int64Array)
         if velocities:
             attrs["velocities"] = _attribute(inst, "velocities", T.Vector3fArray)
             attrs["angularVelocities"] = _attribute(inst, "angularVelocities", T.Vector3fArray)
         paths = {name: attr.path for name, attr in attrs.items()}
         previous = previous_q = None
+        hidden_before = None
         for row, frame in enumerate(frames.tolist()):
             time = float(frame)
+            if births is not None:
+                hidden = hidden_ids(ids, births, frame)
+                if hidden_before is None or hidden != hidden_before:
+                    layer.SetTimeSample(paths["invisibleIds"], time, hidden)
+                hidden_before = hidden
             layer.SetTimeSample(paths["positions"], time, Vt.Vec3fArray.FromNumpy(position[row]))
             # Vt quaternion arrays lay out each element as (i, j, k, real) = (x, y, z, w)
             layer.SetTimeSample(paths["orientationsf"], time,
@@ -263,12 +279,18 @@ def write_root_stage(path, scene, frames, dt: float, layers, manifest: dict) -> 
         Sdf.PrimSpec(world, SPHERE_SHAPES.rsplit("/", 1)[1], Sdf.SpecifierClass)
     if not Sdf.CopySpec(layer, PROTOTYPE, layer, SPHERE_SHAPE):
         raise OSError(f"USD could not copy the sphere prototype for {str(path)!r}")
+    over = getattr(getattr(scene, "boxes", None), "stage", None)  # boxes from a USD set
     with Sdf.ChangeBlock():
         del world.nameChildren[SPHERES.rsplit("/", 1)[1]]
-        Sdf.PrimSpec(world, SPHERES.rsplit("/", 1)[1], Sdf.SpecifierDef, "Scope")
+        # over a set, an Xform that scales the shards' metres to the set's units
+        spheres = Sdf.PrimSpec(world, SPHERES.rsplit("/", 1)[1], Sdf.SpecifierDef,
+                               "Scope" if over is None else "Xform")
+        if over is not None:
+            in_set_units(spheres, over)
     folder = path.parent.resolve()
     layer.subLayerPaths = [Path(os.path.relpath(Path(p).resolve(), folder)).as_posix()
-                           for p in layers]
+                           for p in layers] + ([] if over is None
+                                               else [set_asset_path(over.path, path)])
     layer.customLayerData = {ROOT_MANIFEST: _dictionary({**manifest, "layout": LAYOUT})}
     layer.documentation = (
         f"warpsim animation of scene {getattr(scene, 'name', '')!r}: {frames.size} frames, "

@@ -451,13 +451,17 @@ class Renderer:
         """The picture of spheres (world frame) among the obstacles.
 
         Args:
-            position: sphere centres [m], shape (N, 3).
+            position: sphere centres [m], shape (N, 3); a sphere whose centre is NaN (not
+                born yet) is not drawn.
             orientation: sphere orientations (x, y, z, w), body -> world, shape (N, 4).
             radius: sphere radii [m], shape (N,).
         """
         position = np.asarray(position, dtype=np.float64).reshape(-1, 3)
-        radius = np.asarray(radius, dtype=np.float64).reshape(-1)
-        rotation = quat_to_matrix(np.asarray(orientation, dtype=np.float64).reshape(-1, 4))
+        born = np.isfinite(position).all(axis=1)
+        position = position[born]
+        radius = np.broadcast_to(np.asarray(radius, dtype=np.float64).reshape(-1),
+                                 born.shape)[born]
+        rotation = quat_to_matrix(np.asarray(orientation, dtype=np.float64).reshape(-1, 4)[born])
         rgb, depth = self._rgb.copy(), self._depth.copy()
         _draw_spheres(rgb, depth, self._big, position, radius, rotation, self._light)
         image = Image.fromarray(np.round(rgb * 255.0).astype(np.uint8), "RGB")

@@ -259,7 +259,7 @@ def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False
                       orientation=stacked("orientation"), radius=first.radius,
                       velocity=stacked("velocity"), angular_velocity=stacked("angular_velocity"),
                       events=ContactEvents.concatenate(events) if events else None,
-                      sphere_ids=first.sphere_ids)
+                      sphere_ids=first.sphere_ids, birth_frame=first.birth_frame)
     energy, drift, bounces, capped = (np.array(column) for column in zip(*samples, strict=True))
     scalars = FrameScalars(frame=traj.frame, energy=energy, energy_drift=drift,
                            bounces=np.diff(bounces, prepend=bounces[0]),
@@ -373,9 +373,12 @@ def _up_axis(rr, gravity):
 def _camera(gravity, position: np.ndarray, boxes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(eye, target, up) of the 3D view's first camera: at the upper corner of the region the
     spheres fill at the first written frame (:data:`CAMERA_PERCENTILES`, so inside a closed
-    room), looking at its centre; the obstacles' bounds when there are no spheres."""
+    room), looking at its centre; the obstacles' bounds when there are no spheres (or none is
+    born yet)."""
     up = -np.asarray(gravity, dtype=np.float64)
     up = up / np.linalg.norm(up) if np.any(up) else np.array([0.0, 1.0, 0.0])
+    position = position.reshape(-1, 3)
+    position = position[np.isfinite(position).all(axis=1)]  # the unborn are NaN
     if position.size:
         lo, hi = np.percentile(position, CAMERA_PERCENTILES, axis=0)
     elif boxes is not None and len(boxes):

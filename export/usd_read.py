@@ -129,6 +129,27 @@ def sphere_radii(instancer: UsdGeom.PointInstancer) -> np.ndarray:
     return np.array(scales, dtype=np.float64).reshape(-1, 3)[:, 0]
 
 
+def birth_frames(instancer: UsdGeom.PointInstancer) -> np.ndarray | None:
+    """Each sphere's birth frame, (N,) int64, from ``warpsim:birthFrame``; None when the file
+    has none (every sphere there from its first frame)."""
+    attr = instancer.GetPrim().GetAttribute("warpsim:birthFrame")
+    if not (attr and attr.HasAuthoredValue()):
+        return None
+    return np.array(attr.Get(), dtype=np.int64)
+
+
+def unborn_as_nan(trajectory: Trajectory) -> Trajectory:
+    """``trajectory`` with every value of a sphere before its birth set to NaN (in place)."""
+    if trajectory.birth_frame is None:
+        return trajectory
+    unborn = ~trajectory.alive()
+    for name in ("position", "orientation", "velocity", "angular_velocity"):
+        values = getattr(trajectory, name)
+        if values is not None:
+            values[unborn] = np.nan
+    return trajectory
+
+
 def _stage_dt(stage: Usd.Stage) -> float:
     world = stage.GetPrimAtPath(WORLD)
     dt_attr = world.GetAttribute("warpsim:dt") if world else None
@@ -145,10 +166,10 @@ def _trajectory(stage: Usd.Stage, instancer, frames: np.ndarray) -> Trajectory:
             return None
         return np.stack([s[key] for s in states]).reshape(f, n, width)
 
-    return Trajectory(frame=frames, dt=_stage_dt(stage), position=stacked("position", 3),
-                      orientation=stacked("orientation", 4), radius=radius,
-                      velocity=stacked("velocity", 3),
-                      angular_velocity=stacked("angular_velocity", 3))
+    return unborn_as_nan(Trajectory(
+        frame=frames, dt=_stage_dt(stage), position=stacked("position", 3),
+        orientation=stacked("orientation", 4), radius=radius, velocity=stacked("velocity", 3),
+        angular_velocity=stacked("angular_velocity", 3), birth_frame=birth_frames(instancer)))
 
 
 def shard_instancers(stage: Usd.Stage) -> list[UsdGeom.PointInstancer]:
@@ -190,7 +211,7 @@ def read_sharded_usd(path) -> Trajectory:
         raise ValueError(f"{str(path)!r} has no shard instancers under {SPHERES}")
     frames = recorded_frames(instancers[0])
     parts = {key: [] for key in ("position", "orientation", "velocity", "angular_velocity")}
-    ids, radii = [], []
+    ids, radii, births = [], [], []
     for inst in instancers:
         if not np.array_equal(recorded_frames(inst), frames):
             raise ValueError(f"{str(path)!r}: {inst.GetPath()} has other recorded frames than "
@@ -200,6 +221,7 @@ def read_sharded_usd(path) -> Trajectory:
             values.append(np.stack([s[key] for s in states]) if key in states[0] else None)
         ids.append(np.asarray(inst.GetIdsAttr().Get(), dtype=np.int64))
         radii.append(sphere_radii(inst))
+        births.append(birth_frames(inst))
     all_ids = np.concatenate(ids)
     order = np.argsort(all_ids, kind="stable")
     if np.unique(all_ids).size != all_ids.size:
@@ -214,10 +236,16 @@ def read_sharded_usd(path) -> Trajectory:
     world = stage.GetPrimAtPath(WORLD)
     dt_attr = world.GetAttribute("warpsim:dt") if world else None
     dt = float(dt_attr.Get()) if dt_attr else 1.0 / stage.GetTimeCodesPerSecond()
-    return Trajectory(frame=frames, dt=dt, position=joined("position"),
-                      orientation=joined("orientation"),
-                      radius=np.concatenate(radii)[order], velocity=joined("velocity"),
-                      angular_velocity=joined("angular_velocity"))
+    born = None
+    if any(b is not None for b in births):
+        born = np.concatenate([np.zeros(r.size, dtype=np.int64) if b is None else b
+                               for b, r in zip(births, radii, strict=True)])[order]
+    return unborn_as_nan(Trajectory(frame=frames, dt=dt, position=joined("position"),
+                                    orientation=joined("orientation"),
+                                    radius=np.concatenate(radii)[order],
+                                    velocity=joined("velocity"),
+                                    angular_velocity=joined("angular_velocity"),
+                                    birth_frame=born))
 
 
 def read_sharded_ids(path) -> np.ndarray:
@@ -334,6 +362,10 @@ def read_usd_boxes(path) -> RoundedBoxes | None:
     ``warpsim:`` attributes: float64, equal to the written boxes up to the re-normalisation of
     the rotation that :class:`warpsim.RoundedBoxes` applies (a few ulp).
 
+    A result composed over a USD set (:mod:`warpsim.export.compose`) has no obstacles of its
+    own: its boxes are the set's, read as :func:`warpsim.obstacles_from_usd` reads them (in
+    metres, in the axes the run used, the trajectory's frame).
+
     Returns:
         The boxes, or None when the file has no obstacles.
 
@@ -345,7 +377,13 @@ def read_usd_boxes(path) -> RoundedBoxes | None:
     plain = _boxes_of_layer(layer, path)
     if plain is not _COMPOSE:
         return plain
-    return boxes_of_stage(_stage_of(layer, path), path)
+    boxes = boxes_of_stage(_stage_of(layer, path), path)
+    if boxes is None and layer.subLayerPaths:  # a result composed over a set: the set's boxes,
+        from .stage_in import obstacles_from_usd  # in metres in the axes the run used
+
+        boxes = obstacles_from_usd(path)
+        return boxes if len(boxes) else None
+    return boxes
 
 
 _COMPOSE = object()  # the layer holds more than warpsim writes: read through composition

@@ -44,6 +44,8 @@ class Features:
         lossy: ``energy_retention < 1``: the loss at each bounce.
         energy_correction: the frame kernel resets the speed from the energy after the move.
         events: write every contact into the launch's event buffer.
+        births: some sphere is born after frame 0: the frame kernel skips each sphere's frames
+            before its ``birth_frame`` (no move, no contact, no count).
         free_flight: the frame kernel's free-flight step (a frame whose path lies beyond every
             box's bounds skips the bounce loop; the same bits either way): for swarms that fly
             outside the obstacles' overall bounds; a closed room has no use for its test.
@@ -59,6 +61,7 @@ class Features:
     lossy: bool = False
     energy_correction: bool = False
     events: bool = False
+    births: bool = False
     free_flight: bool = False
 
     def __post_init__(self):
@@ -67,7 +70,7 @@ class Features:
             value = getattr(self, name)
             if not isinstance(value, str) or value not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
-        for name in ("spin", "lossy", "energy_correction", "events", "free_flight"):
+        for name in ("spin", "lossy", "energy_correction", "events", "births", "free_flight"):
             object.__setattr__(self, name, bool(getattr(self, name)))
 
     def but(self, **changes) -> "Features":

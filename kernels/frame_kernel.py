@@ -62,11 +62,16 @@ def frame_kernel(features: Features):
             end for both. A linear kernel contains no ballistic code and vice versa.
             ``free_flight``: test each frame's path against the boxes' overall bounds first
             and take the free step inline when it lies beyond them (module docstring).
+            ``births``: sphere ``i`` takes the step into absolute frame ``k`` only when ``k >
+            birth_frame[i]`` (its state is the one at its birth until then, and the frames it
+            takes are the arithmetic of a run started at its birth); without it
+            ``birth_frame`` is never read.
 
     Kernel parameters beyond the model structs, the sphere constants and the state:
         frame_count: frames this launch advances (>= 0).
         record_every: record one frame in this many and the launch's last one (0: none).
         sphere_offset: index of the launch's first sphere in the swarm (event rows name it).
+        first_frame: absolute frame of the state the launch starts from (births compare it).
         record_position_out, record_orientation_out: (records, N) centres [m] and orientations.
         record_velocity_out, record_angular_velocity_out: (records, N) velocity at the
             recorded frame [m/s] (the state's) and world angular velocity ``Rot`` [rad/s];
@@ -81,6 +86,7 @@ def frame_kernel(features: Features):
     Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
     spin, energy_correction = features.spin, features.energy_correction
     free_flight = features.free_flight
+    births = features.births
     motion = features.motion
     if motion == "ballistic":
         path = ballistic_funcs(features).ballistic_path
@@ -223,9 +229,11 @@ def frame_kernel(features: Features):
         physics: Physics,
         radius: wp.array[scalar],
         mass: wp.array[scalar],
+        birth_frame: wp.array[wp.int32],
         frame_count: int,
         record_every: int,
         sphere_offset: int,
+        first_frame: int,
         # In:
         position_in: wp.array[vec3],
         velocity_in: wp.array[vec3],
@@ -264,12 +272,24 @@ def frame_kernel(features: Features):
         capped = int(0)
         row = int(0)
         with_motion = record_velocity_out.shape[0] > 0
+        born = int(0)
+        if wp.static(births):
+            born = birth_frame[i] - first_frame  # frames of this launch before its birth
         for f in range(frame_count):
-            x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m, physics, boxes,
-                                                    broad, f + 1, sphere, events_out)
-            bounces += b - s
-            supports += s
-            capped += c
+            if wp.static(births):
+                if f >= born:
+                    x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m, physics,
+                                                            boxes, broad, f + 1, sphere,
+                                                            events_out)
+                    bounces += b - s
+                    supports += s
+                    capped += c
+            else:
+                x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m, physics,
+                                                        boxes, broad, f + 1, sphere, events_out)
+                bounces += b - s
+                supports += s
+                capped += c
             if record_every > 0:
                 if (f + 1) % record_every == 0 or f + 1 == frame_count:
                     record_position_out[row, i] = x

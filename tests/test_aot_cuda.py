@@ -25,8 +25,8 @@ from warpsim.kernels.frame_kernel import frame_kernel
 
 ARCHS = (80, 90)
 FLAGS = (False, True)
-ALL_ON = dict(spin=True, lossy=True, energy_correction=True, events=True)
-ALL_OFF = dict(spin=False, lossy=False, energy_correction=False, events=False)
+ALL_ON = dict(spin=True, lossy=True, energy_correction=True, events=True, births=True)
+ALL_OFF = dict(spin=False, lossy=False, energy_correction=False, events=False, births=False)
 
 
 def sample():

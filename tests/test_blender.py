@@ -68,3 +68,47 @@ def test_blender_import_keeps_frames_positions_rotations_and_materials(tmp_path)
         # the prototype's mesh stays in the file's frame: instance = axis change @ rotation
         true = Y_UP_TO_Z_UP @ quat_to_matrix(traj.orientation[k][order])
         np.testing.assert_allclose(rotation, true, atol=ROTATION_TOL)
+
+
+def test_blender_import_of_a_result_composed_over_a_set(tmp_path):
+    """A result over an artist's set (Z up, centimetres): Blender brings in the set's own
+    objects and the spheres where the composed stage puts them, in one frame (the set's axes,
+    so no axis change), at one unit scale for both (metres or the set's centimetres, whichever
+    Blender's unit conversion gives)."""
+    from pxr import Usd, UsdGeom
+    from test_usd_stage import author_set, write_scene
+
+    author_set(tmp_path / "set.usda")
+    scene = warpsim.Scene.load(write_scene(tmp_path))
+    traj = warpsim.Simulator(scene, scene.spawn(n=6, seed=3)).run(4)
+    path = write_usd(tmp_path / "result.usdc", scene, traj)
+    stage = Usd.Stage.Open(str(path))
+    instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Spheres"))
+    floor = UsdGeom.Xformable(stage.GetPrimAtPath("/Set/Floor"))
+    floor_at = np.array(floor.ComputeLocalToWorldTransform(Usd.TimeCode(0)))[3, :3]  # [cm]
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    assert bpy.ops.wm.usd_import(filepath=str(path)) == {"FINISHED"}
+    blender = bpy.context.scene
+    names = {o.name for o in bpy.data.objects}
+    assert {"Floor", "Block", "Crate"} <= names  # the set's objects, not warpsim's copies
+    assert not any(name.startswith("Box_") for name in names)
+    scale = np.array(bpy.data.objects["Floor"].matrix_world.translation)[0] / floor_at[0]
+    assert scale == pytest.approx(1.0, rel=1e-6) or scale == pytest.approx(0.01, rel=1e-6)
+    np.testing.assert_allclose(np.array(bpy.data.objects["Floor"].matrix_world.translation),
+                               scale * floor_at, rtol=1e-6, atol=1e-6)
+    for frame in traj.frame:
+        blender.frame_set(int(frame))
+        graph = bpy.context.evaluated_depsgraph_get()
+        placed = np.array([np.array(inst.matrix_world)[:3, 3] for inst in graph.object_instances
+                           if inst.is_instance and inst.object.name.startswith("CheckerBall")])
+        assert len(placed) == traj.sphere_count
+        time = Usd.TimeCode(float(frame))
+        to_world = np.array(instancer.ComputeLocalToWorldTransform(time))
+        usd = np.array([(np.array(m) @ to_world)[3, :3]  # [cm], in the set's world
+                        for m in instancer.ComputeInstanceTransformsAtTime(time, time)])
+        np.testing.assert_allclose(usd, traj.position[frame] / 0.01, rtol=1e-5, atol=1e-3)
+        expected = scale * usd
+        order = [int(np.argmin(np.linalg.norm(expected - p, axis=1))) for p in placed]
+        assert sorted(order) == list(range(traj.sphere_count))
+        np.testing.assert_allclose(placed, expected[order], atol=100 * scale * POSITION_TOL)

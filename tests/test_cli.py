@@ -22,7 +22,8 @@ def test_scenes_lists_every_bundled_scene():
     assert out.returncode == 0, out.stderr
     names = [line.split()[0] for line in out.stdout.strip().splitlines()]
     assert names == [name for name, _ in ws.list_scenes()]
-    assert {"room", "galton", "staircase", "pinball", "thin-walls", "wedge", "spin"} <= set(names)
+    assert {"room", "galton", "staircase", "pinball", "thin-walls", "wedge", "spin",
+            "nozzle"} <= set(names)
 
 
 @pytest.mark.slow

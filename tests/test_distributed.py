@@ -187,6 +187,70 @@ def test_other_shard_counts_give_the_same_bits(scene, reference, client, tmp_pat
         assert_same_as_reference(wd.read(out), reference)
 
 
+# --- spheres born over time, and a scene on a USD set ------------------------------------------
+
+NOZZLE_FRAMES = 40  # the nozzle's sphere k is born at frame round(0.6 k): 0 to 47 for N = 80
+
+
+@pytest.fixture(scope="module")
+def nozzle_reference():
+    """The sharded draw of the nozzle, births worked out by hand, run whole in one Simulator."""
+    scene = ws.Scene.load("nozzle")
+    blocks = [scene.spawn(n=min(BLOCK, N - b * BLOCK), seed=wd.block_seed(SEED, b))
+              for b in range(-(-N // BLOCK))]
+    births = np.rint(np.arange(N) / 200.0 * 120.0).astype(np.int64)  # at k / 200 s, 120 fps
+    swarm = ws.Swarm(**{k: np.concatenate([getattr(s, k) for s in blocks])
+                        for k in ("position", "velocity", "radius", "mass", "angular_momentum",
+                                  "orientation")}, birth_frame=births)
+    traj = ws.Simulator(scene, swarm).run(NOZZLE_FRAMES, every=EVERY, velocities=True)
+    assert (births > NOZZLE_FRAMES).any() and np.isnan(traj.position[-1]).any()
+    return scene, swarm, traj
+
+
+def assert_births_as_reference(path, nozzle_reference):
+    _, swarm, ref = nozzle_reference
+    back = wd.read(path)
+    assert back.birth_frame.tolist() == swarm.birth_frame.tolist()
+    np.testing.assert_array_equal(back.frame, ref.frame)
+    for name in ("position", "orientation", "velocity"):
+        assert np.array_equal(getattr(back, name), getattr(ref, name).astype(np.float32),
+                              equal_nan=True), name
+    stage = Usd.Stage.Open(str(path))
+    for inst in stage.GetPrimAtPath("/World/Spheres").GetChildren():
+        inst = UsdGeom.PointInstancer(inst)
+        ids = np.asarray(inst.GetIdsAttr().Get())
+        for frame in ref.frame:
+            hidden = np.asarray(inst.GetInvisibleIdsAttr().Get(float(frame)), dtype=np.int64)
+            assert sorted(hidden.tolist()) == ids[swarm.birth_frame[ids] > frame].tolist()
+
+
+@pytest.mark.slow
+def test_births_in_process_shards_equal_one_simulator(nozzle_reference, tmp_path):
+    scene = nozzle_reference[0]
+    out = tmp_path / "nozzle.usda"
+    run(scene, out, shards=3, frames=NOZZLE_FRAMES, velocities=True)
+    assert_births_as_reference(out, nozzle_reference)
+
+
+@pytest.mark.slow
+def test_births_and_a_usd_set_on_the_cluster_equal_one_process(nozzle_reference, client,
+                                                               tmp_path):
+    from test_usd_stage import assert_composed_over_the_set, author_set, write_scene
+
+    scene = nozzle_reference[0]
+    out = tmp_path / "nozzle.usdc"
+    run(scene, out, client=client, shards=4, frames=NOZZLE_FRAMES, velocities=True)
+    assert_births_as_reference(out, nozzle_reference)
+
+    author_set(tmp_path / "set.usda")
+    on_set = ws.Scene.load(write_scene(tmp_path))
+    composed = tmp_path / "composed.usdc"
+    run(on_set, composed, client=client, n=24, frames=12, every=3, block=8, shards=3)
+    assert_composed_over_the_set(composed)
+    plain = ws.Simulator(on_set, wd.sharded_spawn(on_set, 24, SEED, 8)).run(12, every=3)
+    assert np.array_equal(wd.read(composed).position, plain.position.astype(np.float32))
+
+
 @pytest.mark.slow
 def test_rerun_recomputes_only_missing_and_stale_shards(scene, reference, client, tmp_path):
     out = tmp_path / "run.usdc"

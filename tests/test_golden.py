@@ -28,6 +28,7 @@ GOLDEN = {
     ("spin", "float32"): ("2ef8503057c76cce", 203, 0),
     ("thin-walls", "float64"): ("74c20f0f28517466", 62695, 0),
     ("wedge", "float32"): ("ee89e21bc832cf22", 11901, 450),
+    ("nozzle", "float32"): ("418d83c1f07df36c", 22, 0),
 }
 
 

@@ -41,6 +41,8 @@ def all_kernels():
                 out.append((f"frame/{prec}/{motion}/{spin}/{corr}/{lossy}/{bvh}/{events}",
                             frame_kernel(f.but(spin=spin, lossy=lossy, energy_correction=corr,
                                                events=events))))
+        out.append((f"frame/{prec}/{motion}/births/{bvh}",
+                     frame_kernel(f.but(spin=True, events=True, births=True))))
     return out
 
 
@@ -71,7 +73,7 @@ FRAME_COUNTERS = {"bounce_count_out", "support_count_out", "capped_count_out",
                   "record_orientation_out", "record_velocity_out",
                   "record_angular_velocity_out"}
 #: Plain per-launch values (the launch helper's ``values``).
-LAUNCH_VALUES = {"frame_count", "record_every", "sphere_offset"}
+LAUNCH_VALUES = {"frame_count", "record_every", "sphere_offset", "first_frame"}
 #: Outputs of a whole launch (the launch helper's ``launch_outputs``).
 EVENT_OUTPUTS = {"events_out"}
 
@@ -100,7 +102,7 @@ def test_every_simulator_argument_is_the_named_array():
     sim = ws.Simulator(ws.Scene(boxes, friction=0.1), swarm, device="cpu")
     records = sim._records(2, True)
     events = {"events_out": event_buffer(sim.model.precision, sim.device, 4)}
-    values = {"frame_count": 3, "record_every": 2, "sphere_offset": 0}
+    values = {"frame_count": 3, "record_every": 2, "sphere_offset": 0, "first_frame": 0}
     args = kernel_arguments(sim._kernel, model=sim.model, spheres=sim.spheres,
                             state_in=sim.state_0, state_out=sim.state_1,
                             outputs={**sim.counters, **records}, launch_outputs=events,

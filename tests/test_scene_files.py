@@ -20,7 +20,7 @@ from warpsim.scene_files import SceneFileError, euler_deg_to_quat, list_scenes
 
 load_scene = Scene.load
 
-BUNDLED = ("galton", "pinball", "room", "spin", "staircase", "thin-walls", "wedge")
+BUNDLED = ("galton", "nozzle", "pinball", "room", "spin", "staircase", "thin-walls", "wedge")
 
 # One floor slab, three unit cubes (box[1..3]) and an emitter well clear of all of them.
 MINIMAL = """\

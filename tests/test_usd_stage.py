@@ -596,3 +596,83 @@ def test_composed_result_keeps_far_positions_in_the_sets_units(set_path, tmp_pat
     np.testing.assert_allclose(rel @ to_world[:3, :3] + to_world[3, :3],  # in centimetres
                                back.position[2] / CM, rtol=1e-12, atol=1e-9)
     assert compliance_errors(out) == []
+
+
+def shard_instancers_of(stage):
+    return [UsdGeom.PointInstancer(p) for p in stage.GetPrimAtPath("/World/Spheres").GetChildren()]
+
+
+def assert_composed_over_the_set(out, set_sublayer="./set.usda"):
+    """``out`` opens over the set: the set's units, axes and prims, no copy of its boxes, and
+    every sphere instancer mapped from metres to centimetres in the world frame."""
+    layer = Sdf.Layer.FindOrOpen(str(out))
+    assert list(layer.subLayerPaths)[-1] == set_sublayer
+    stage = Usd.Stage.Open(str(out))
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
+    assert UsdGeom.GetStageMetersPerUnit(stage) == CM
+    for prim in ("/Set/Floor", "/Set/Key", "/Set/Camera", "/PhysicsScene"):
+        assert stage.GetPrimAtPath(prim), prim
+    assert not stage.GetPrimAtPath("/World/Obstacles")
+    prim = stage.GetPrimAtPath("/World/Spheres")
+    instancers = ([UsdGeom.PointInstancer(prim)] if prim.IsA(UsdGeom.PointInstancer)
+                  else shard_instancers_of(stage))
+    assert instancers
+    for instancer in instancers:
+        to_world = np.array(instancer.ComputeLocalToWorldTransform(Usd.TimeCode(0)))
+        np.testing.assert_allclose(to_world, np.diag([100.0, 100.0, 100.0, 1.0]), rtol=1e-15)
+    assert compliance_errors(out) == []
+    assert_boxes(ws.export.read_usd_boxes(out), EXPECTED)  # what preview draws: the set's boxes
+
+
+@pytest.mark.parametrize("fmt", ["usda", "usdc"])
+def test_sharded_run_composes_over_the_set_as_a_plain_run(set_path, tmp_path, fmt):
+    from warpsim import distributed as wd
+
+    scene = ws.Scene.load(write_scene(tmp_path))
+    out = tmp_path / f"sharded.{fmt}"
+    summary = wd.run(scene, out, n=24, seed=3, frames=12, every=3, block=8, shards=3,
+                     progress=False)
+    assert summary.shards == 3
+    assert_composed_over_the_set(out)
+    swarm = wd.sharded_spawn(scene, 24, 3, 8)
+    plain = ws.Simulator(scene, swarm).run(12, every=3)
+    back = read_usd(out)
+    np.testing.assert_array_equal(back.frame, plain.frame)
+    np.testing.assert_array_equal(back.position, plain.position.astype(np.float32))
+    z = back.position[..., 2]  # falling along the set's -z onto its floor, never through it
+    assert z.min() >= swarm.radius.min() - 1e-5 and (z[-1] < z[0]).all()
+    with pytest.raises(ValueError, match="is the set the result composes over"):
+        wd.run(scene, set_path, n=8, frames=2, block=8, progress=False)
+
+
+def test_preview_of_a_composed_result_draws_the_sets_boxes(set_path, tmp_path):
+    from PIL import ImageChops
+
+    from warpsim.export import draw_frame, render_preview
+
+    scene = ws.Scene.load(write_scene(tmp_path))
+    traj = ws.Simulator(scene, scene.spawn(seed=3)).run(6)
+    out = write_usd(tmp_path / "result.usdc", scene, traj)
+    assert_composed_over_the_set(out)
+    png = render_preview(out, -1, tmp_path / "frame.png", size=(160, 90))
+    boxes = ws.RoundedBoxes(center=EXPECTED["center"], half_extents=EXPECTED["half_extents"],
+                            rotation=[quat_of(m) for m in EXPECTED["matrix"]],
+                            radius=EXPECTED["radius"])
+    want, _ = draw_frame(boxes, traj.position[-1], traj.orientation[-1], traj.radius,
+                         size=(160, 90))
+    from PIL import Image
+
+    got = Image.open(png).convert("RGB")
+    assert ImageChops.difference(got, want).getbbox() is None or np.abs(
+        np.asarray(got, dtype=int) - np.asarray(want, dtype=int)).max() <= 1
+    bare, _ = draw_frame(None, traj.position[-1], traj.orientation[-1], traj.radius,
+                         size=(160, 90))
+    assert ImageChops.difference(got, bare).getbbox() is not None  # the set is drawn
+
+
+def quat_of(matrix) -> tuple[float, float, float, float]:
+    """The unit quaternion (x, y, z, w) of a rotation matrix (w > 0 here: no half turns)."""
+    m = np.asarray(matrix)
+    w = math.sqrt(max(0.0, 1.0 + m[0, 0] + m[1, 1] + m[2, 2])) / 2.0
+    return ((m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w),
+            (m[1, 0] - m[0, 1]) / (4 * w), w)

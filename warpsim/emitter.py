@@ -73,6 +73,16 @@ class Emitter:
         angular_momentum: initial angular momentum of every sphere [kg m^2/s], shape (3,).
         seed: default seed of :meth:`spawn`, an integer >= 0.
         clearance: minimum gap between a new sphere and any obstacle [m], >= 0.
+        start: when the first sphere is born [s], >= 0.
+        rate: spheres born per second, > 0, or None; sphere ``k`` is emitted at ``start + k /
+            rate`` (:meth:`birth_frames`). With neither ``rate`` nor ``duration`` every sphere
+            is born at ``start``.
+        duration: the time [s] over which the spheres are emitted, > 0, or None: the rate is
+            then ``n / duration`` for ``n`` spheres. Given with ``rate``, ``rate x duration``
+            must round to ``count``, and ``rate`` rules for another ``n``.
+
+    A sphere's drawn state is its state at its birth (see :class:`warpsim.Swarm`): it appears
+    where it was drawn, with its drawn velocity, at the frame nearest its emission time.
 
     Raises:
         ValueError: on a bad field, naming it (and the index for vectors and ranges).
@@ -91,6 +101,9 @@ class Emitter:
     angular_momentum: tuple[float, float, float] = (0.0, 0.0, 0.0)
     seed: int = 0
     clearance: float = DEFAULT_CLEARANCE
+    start: float = 0.0
+    rate: float | None = None
+    duration: float | None = None
 
     def __post_init__(self):
         checked = check.emitter_fields({f.name: getattr(self, f.name) for f in fields(self)})
@@ -118,7 +131,45 @@ class Emitter:
         values = {key: table.get(key, default) for key, default in known.items()}
         return cls(**check.emitter_fields(values, where=f"{where}."))
 
-    def spawn(self, boxes: RoundedBoxes, n: int | None = None, seed: int | None = None) -> Swarm:
+    @property
+    def emits_over_time(self) -> bool:
+        """Whether some sphere is born after frame 0 (a ``start``, ``rate`` or ``duration``)."""
+        return self.start > 0.0 or self.rate is not None or self.duration is not None
+
+    def birth_frames(self, dt: float, n: int | None = None, first: int = 0,
+                     size: int | None = None) -> np.ndarray:
+        """The birth frame of spheres ``first .. first + size - 1`` of a swarm of ``n``.
+
+        Sphere ``k`` is emitted at ``t_k = start + k / rate`` (``rate = n / duration`` when
+        only ``duration`` is given; every ``t_k = start`` with neither) and born at the frame
+        nearest ``t_k``: ``round(t_k / dt)``, halves to even.
+
+        Args:
+            dt: the run's frame duration [s], > 0.
+            n: spheres of the whole swarm; None for :attr:`count`.
+            first, size: the spheres wanted (default: all ``n``).
+
+        Returns:
+            (size,) int64 frame numbers, non-decreasing.
+
+        Raises:
+            ValueError: a bad ``dt``, or a birth frame at or beyond ``2**31``.
+        """
+        n = self.count if n is None else check.positive_int("n", n)
+        dt = check.scalar("dt", dt, positive=True)
+        size = n - first if size is None else size
+        k = np.arange(first, first + size, dtype=np.float64)
+        rate = self.rate if self.rate is not None else (
+            n / self.duration if self.duration is not None else None)
+        times = np.full(size, self.start) if rate is None else self.start + k / rate
+        frames = np.rint(times / dt)
+        if frames.size and not frames[-1] < check.INT_LIMIT:
+            raise ValueError(f"emitter: the last sphere would be born at frame {frames[-1]:g} "
+                             f"(t = {times[-1]:g} s, dt = {dt:g} s): at most 2**31 - 1")
+        return frames.astype(np.int64)
+
+    def spawn(self, boxes: RoundedBoxes, n: int | None = None, seed: int | None = None,
+              dt: float | None = None) -> Swarm:
         """Draw ``n`` spheres clear of ``boxes``.
 
         Args:
@@ -126,6 +177,8 @@ class Emitter:
             n: number of spheres; None for :attr:`count`.
             seed: integer >= 0; None for :attr:`seed`. The same emitter, boxes, ``n`` and
                 ``seed`` always give identical arrays.
+            dt: the run's frame duration [s]: the swarm's birth frames come from it
+                (:meth:`birth_frames`); needed only when the emitter emits over time.
 
         Returns:
             A :class:`warpsim.Swarm` with identity orientations; every centre ``p`` satisfies
@@ -141,16 +194,18 @@ class Emitter:
             raise ValueError(f"boxes must be a warpsim.RoundedBoxes, got {type(boxes).__name__}")
         n = self.count if n is None else check.positive_int("n", n)
         seed = self.seed if seed is None else check.positive_int("seed", seed, minimum=0)
-        return self.spawn_many(boxes, [n], [seed])[0]
+        return self.spawn_many(boxes, [n], [seed], dt)[0]
 
-    def spawn_many(self, boxes: RoundedBoxes, counts, seeds) -> list[Swarm]:
-        """Draw several swarms at once: ``[spawn(boxes, n, seed) for n, seed in zip(counts,
-        seeds)]``, the same arrays bit for bit, with the clearance of every swarm's pending
-        spheres tested in one query per round (a sharded draw of many small blocks).
+    def spawn_many(self, boxes: RoundedBoxes, counts, seeds,
+                   dt: float | None = None) -> list[Swarm]:
+        """Draw several swarms at once: ``[spawn(boxes, n, seed, dt) for n, seed in
+        zip(counts, seeds)]``, the same arrays bit for bit, with the clearance of every swarm's
+        pending spheres tested in one query per round (a sharded draw of many small blocks).
 
         Args:
             boxes: the obstacles (never modified).
             counts, seeds: one ``n`` (>= 1) and one ``seed`` (>= 0) per swarm, already checked.
+            dt: as :meth:`spawn`'s.
 
         Raises:
             ValueError: as :meth:`spawn`, for the first swarm that cannot be placed.
@@ -165,13 +220,21 @@ class Emitter:
             radius = radius_rng.uniform(*self.radius, size=n)
             mass = mass_rng.uniform(*self.mass, size=n)
             velocity = self._velocities(velocity_rng, n)
-            parts.append((radius, mass, velocity, position_rng))
+            births = 0
+            if self.emits_over_time:
+                if dt is None:
+                    raise ValueError("this emitter emits over time (start, rate or duration): "
+                                     "spawn it with the run's dt")
+                births = self.birth_frames(dt, n)
+            parts.append((radius, mass, velocity, births, position_rng))
         positions = self._positions([rng for *_, rng in parts], boxes,
                                     [radius for radius, *_ in parts])
         return [Swarm(position=position, velocity=velocity, radius=radius, mass=mass,
                       angular_momentum=np.tile(np.asarray(self.angular_momentum),
-                                               (radius.shape[0], 1)))
-                for (radius, mass, velocity, _), position in zip(parts, positions, strict=True)]
+                                               (radius.shape[0], 1)),
+                      birth_frame=births)
+                for (radius, mass, velocity, births, _), position
+                in zip(parts, positions, strict=True)]
 
     def _region(self) -> str:
         return f"center {list(self.center)}, half_extents {list(self.half_extents)}"

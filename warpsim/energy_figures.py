@@ -25,15 +25,18 @@ def figures(sim, start, state=None) -> dict:
     """``{"spheres", "drift", "lost", "scale", "gained", "retention"}`` of a simulator's state:
     the largest relative drift and gain per sphere, the energy lost and the energy above the
     lowest point (sums [J]), on the scale of :mod:`warpsim.energy`; ``start``: the swarm's
-    start positions [m]; :func:`combine` merges shards', :func:`line` says them."""
+    start positions [m]; :func:`combine` merges shards', :func:`line` says them. Only the
+    spheres born by the state's frame count."""
     from .energy import energy_scale
 
-    e0 = np.asarray(sim.initial_energy, dtype=np.float64)
+    frame = sim.frame if state is None else state.frame
+    born = np.asarray(getattr(sim, "birth_frame", np.zeros(len(sim), dtype=np.int64))) <= frame
+    e0 = np.asarray(sim.initial_energy, dtype=np.float64)[born]
     if not len(e0):
         return {"spheres": 0, "drift": 0.0, "lost": 0.0, "scale": 0.0, "gained": 0.0,
                 "retention": float(sim.scene.energy_retention)}
-    scale = energy_scale(e0, sim.mass, lowest(sim, start))
-    energy = np.asarray(sim.mechanical_energy(state), dtype=np.float64)
+    scale = energy_scale(e0, sim.mass[born], lowest(sim, start))
+    energy = np.asarray(sim.mechanical_energy(state), dtype=np.float64)[born]
     return {"spheres": int(len(e0)), "drift": float(np.max(np.abs(energy - e0) / scale)),
             "lost": float(np.sum(e0 - energy)), "scale": float(np.sum(scale)),
             "gained": float(np.max((energy - e0) / scale)),

@@ -60,7 +60,9 @@ def run_bytes(n: int, records: int, *, kept: int | None = None, precision_bytes:
     """What a run of ``n`` spheres keeping ``records`` frames of ``kept`` spheres holds.
 
     Args:
-        n: spheres simulated. records: frames kept on the host (the first state included).
+        n: spheres simulated, those born later too (every sphere has its state on the device
+            and its slot in every record from the start). records: frames kept on the host
+            (the first state included).
         kept: spheres whose frames are kept (``Simulator.run(spheres=...)``); None: all.
         precision_bytes: 4 (float32) or 8 (float64).
         velocities: velocities and angular velocities are recorded too.

@@ -5,7 +5,8 @@ Three bundles of Warp arrays, each made at one validating boundary:
 - :class:`Model` (:func:`put_model`): the static scene as the kernels' three ``# Model`` structs
   (``kernels.data.model_structs``): the obstacles ``boxes``, the broad phase's ``broad`` and the
   constants ``physics``. Its field names *are* the kernels' parameter names.
-- :class:`Spheres` (:func:`put_spheres`): the per-sphere constants (``radius``, ``mass``).
+- :class:`Spheres` (:func:`put_spheres`): the per-sphere constants (``radius``, ``mass``,
+  ``birth_frame``).
 - :class:`DeviceState` (:func:`put_state`): the per-sphere state that a frame changes. A kernel
   reads it through parameters named ``<field>_in`` and writes a second one through
   ``<field>_out``; the simulator swaps ``state_0`` and ``state_1`` after each launch.
@@ -71,10 +72,13 @@ class Spheres:
     Attributes:
         radius: sphere radii [m], shape (N,).
         mass: sphere masses [kg], shape (N,).
+        birth_frame: the frame each sphere is born at (int32), shape (N,); read only by
+            kernels built with births (``kernels.data.Features.births``).
     """
 
     radius: wp.array
     mass: wp.array
+    birth_frame: wp.array | None = None
 
     def __len__(self) -> int:
         return int(self.radius.shape[0])
@@ -199,10 +203,15 @@ def _broad_phase(broad, grid: Grid | None, p: Precision, device):
     return broad
 
 
-def put_spheres(radius: np.ndarray, mass: np.ndarray, p: Precision, device) -> Spheres:
-    """Validated per-sphere constants (float64, (N,)) as :class:`Spheres` on ``device``."""
+def put_spheres(radius: np.ndarray, mass: np.ndarray, p: Precision, device,
+                birth_frame: np.ndarray | None = None) -> Spheres:
+    """Validated per-sphere constants (float64 radius and mass, integer birth frames, (N,)
+    each; None for births all at 0) as :class:`Spheres` on ``device``."""
+    births = (np.zeros(len(radius), dtype=np.int32) if birth_frame is None
+              else np.ascontiguousarray(birth_frame, dtype=np.int32))
     return Spheres(radius=to_device(radius, p.scalar, p, device),
-                   mass=to_device(mass, p.scalar, p, device))
+                   mass=to_device(mass, p.scalar, p, device),
+                   birth_frame=wp.array(births, dtype=wp.int32, device=device))
 
 
 def put_state(p: Precision, device, *, position, velocity, energy, angular_momentum,

@@ -99,8 +99,11 @@ class Scene:
         """
         return cls(**read_scene_file(name_or_path))
 
-    def spawn(self, n: int | None = None, seed: int | None = None):
+    def spawn(self, n: int | None = None, seed: int | None = None, dt: float | None = None):
         """The swarm of this scene's emitter: ``n`` spheres (default: the emitter's count).
+
+        ``dt`` [s] (None: the scene's) is the frame duration the birth frames of an emitter
+        that emits over time are counted in (``Emitter.birth_frames``).
 
         Returns:
             A :class:`warpsim.Swarm`; the same ``seed`` gives the same swarm. No sphere starts
@@ -121,7 +124,10 @@ class Scene:
         if seed is not None:
             check.positive_int("seed", seed, minimum=0)
         try:
-            swarm = self.emitter.spawn(self.boxes, n=n, seed=seed)
+            # an emitter of births counts them in frames of dt; any other needs no dt
+            timing = ({"dt": self.dt if dt is None else dt}
+                      if getattr(self.emitter, "emits_over_time", False) else {})
+            swarm = self.emitter.spawn(self.boxes, n=n, seed=seed, **timing)
             if not isinstance(self.emitter, Emitter):  # an emitter of its own: checked here
                 feasibility.check_outside(self.boxes, swarm.position, swarm.radius, "float64")
         except ValueError as exc:
@@ -130,9 +136,9 @@ class Scene:
             raise SceneFileError(f"{os.path.basename(self.source)}: {exc}") from exc
         return swarm
 
-    def spawn_many(self, counts, seeds) -> list:
-        """Several swarms of this scene's emitter at once, each as ``spawn(n, seed)`` gives it
-        bit for bit (:meth:`warpsim.Emitter.spawn_many`: the clearance of all of them tested
+    def spawn_many(self, counts, seeds, dt: float | None = None) -> list:
+        """Several swarms of this scene's emitter at once, each as ``spawn(n, seed, dt)`` gives
+        it bit for bit (:meth:`warpsim.Emitter.spawn_many`: the clearance of all of them tested
         together); ``counts`` (each >= 1) and ``seeds`` (each >= 0) pair up.
 
         Raises:
@@ -143,9 +149,11 @@ class Scene:
         counts = [check.positive_int("n", n) for n in counts]
         seeds = [check.positive_int("seed", seed, minimum=0) for seed in seeds]
         if not isinstance(self.emitter, Emitter):
-            return [self.spawn(n, seed) for n, seed in zip(counts, seeds, strict=True)]
+            return [self.spawn(n, seed, dt) for n, seed in zip(counts, seeds, strict=True)]
         try:
-            return self.emitter.spawn_many(self.boxes, counts, seeds)
+            return self.emitter.spawn_many(
+                self.boxes, counts, seeds,
+                (self.dt if dt is None else dt) if self.emitter.emits_over_time else None)
         except ValueError as exc:
             if self.source is None:
                 raise

@@ -53,7 +53,8 @@ class Stats:
     """Counters since the start of a simulation.
 
     Attributes:
-        frames: frames advanced. sphere_frames: frames times spheres.
+        frames: frames advanced. sphere_frames: frames simulated, summed over the spheres (a
+            sphere born at frame ``b`` counts those after ``b`` only).
         bounces: bounces taken, all spheres (contacts that reflect; resting contacts are in
             ``supports``).
         supports: resting or sliding contacts on a support, all spheres (a sphere at rest on
@@ -189,6 +190,8 @@ class Simulator:
         self.energy_origin = _energy_origin(scene, swarm)
         self.frame = 0
         self._n = len(swarm)
+        self.birth_frame = swarm.birth_frame.copy()
+        """The frame each sphere is born at, (N,), int64 (see :class:`warpsim.Swarm`)."""
         self._radius_host = swarm.radius.copy()
         self.mass = swarm.mass.copy()
         """Sphere masses [kg], (N,), float64."""
@@ -198,6 +201,7 @@ class Simulator:
                                   broad_phase=self.broad_phase, spin=self.spin,
                                   lossy=scene.energy_retention < 1.0,
                                   energy_correction=self.energy_correction,
+                                  births=swarm.has_births,
                                   free_flight=_starts_in_free_flight(scene.boxes, swarm))
         self._kernel = frame_kernel(self._features)
         self._upload(swarm)
@@ -225,7 +229,7 @@ class Simulator:
                                energy_retention=scene.energy_retention,
                                max_bounces=self.max_bounces)
         """The scene on the device (:class:`warpsim.model.Model`)."""
-        self.spheres = put_spheres(swarm.radius, swarm.mass, p, dev)
+        self.spheres = put_spheres(swarm.radius, swarm.mass, p, dev, swarm.birth_frame)
         """The per-sphere constants on the device (:class:`warpsim.model.Spheres`)."""
         self.state_0 = put_state(p, dev, position=swarm.position, velocity=swarm.velocity,
                                  energy=energy, angular_momentum=swarm.angular_momentum,
@@ -290,7 +294,8 @@ class Simulator:
             records = self._no_records
         kernel = (self._kernel if events is None
                   else frame_kernel(self._features.but(events=True)))
-        values = {"frame_count": int(frames), "record_every": int(every)}
+        values = {"frame_count": int(frames), "record_every": int(every),
+                  "first_frame": int(self.frame)}
         shards = self._shards if len(self._shards) > 1 else [None]
         buffers = events if events is not None else [self._no_events] * len(shards)
         calls = [self._arguments(kernel, rows, values, records, buffer)
@@ -416,12 +421,20 @@ class Simulator:
         finally:
             bar.close()
             self._seconds += time.perf_counter() - start
-        return Trajectory(frame=np.array([first] + [first + k for k in stops], dtype=np.int64),
+        frame_numbers = np.array([first] + [first + k for k in stops], dtype=np.int64)
+        births = None
+        if self._features.births:
+            births = (self.birth_frame if keep is None else self.birth_frame[keep]).copy()
+            unborn = frame_numbers[:, None] < births[None, :]
+            for values in (position, orientation, velocity, angular):
+                if values is not None:
+                    values[unborn] = np.nan
+        return Trajectory(frame=frame_numbers,
                           dt=self.dt, position=position, orientation=orientation,
                           radius=(self._radius_host if keep is None
                                   else self._radius_host[keep]).copy(),
                           velocity=velocity, sphere_ids=None if keep is None else keep.copy(),
-                          angular_velocity=angular,
+                          angular_velocity=angular, birth_frame=births,
                           events=(_contact_events(gathered, dropped, self.dt, self.settings(),
                                                   event_capacity) if events else None))
 
@@ -561,7 +574,8 @@ class Simulator:
         capped = self.counters["capped_count_out"].numpy()
         bounces = self.counters["bounce_count_out"].numpy()
         supports = self.counters["support_count_out"].numpy()
-        return Stats(frames=self.frame, sphere_frames=self.frame * self._n,
+        lived = np.clip(self.frame - self.birth_frame, 0, None)
+        return Stats(frames=self.frame, sphere_frames=int(lived.sum()),
                      bounces=int(bounces.astype(np.int64).sum()),
                      supports=int(supports.astype(np.int64).sum()),
                      capped=int(capped.astype(np.int64).sum()),

@@ -10,6 +10,14 @@ from . import validation as check
 class Swarm:
     """Initial state of ``N`` spheres (validated float64 copies, read-only).
 
+    Births: a sphere with ``birth_frame = b`` does not exist before frame ``b`` (it is not
+    simulated, has no contacts, counts in no statistics and is not drawn). Its ``position``,
+    ``velocity``, ``angular_momentum`` and ``orientation`` here are its state *at* frame ``b``
+    (time ``b dt``, recorded as frame ``b``), and the step from frame ``b`` to ``b + 1`` is its
+    first: from then on it moves bit for bit as the only sphere of a run started with that state
+    would, its frame ``k`` being frame ``b + k`` here. A birth after a run's last frame is
+    allowed: that sphere simply never appears.
+
     Args:
         position: sphere centres in the world [m], shape (N, 3).
         velocity: linear velocities [m/s], shape (N, 3).
@@ -17,13 +25,15 @@ class Swarm:
         mass: masses [kg], scalar or (N,), each > 0.
         angular_momentum: about each centre [kg m^2/s], shape (N, 3); None for zero.
         orientation: unit quaternions (x, y, z, w), body -> world, shape (N, 4); None for identity.
+        birth_frame: the frame each sphere appears at, an integer or (N,) integers, each in
+            ``[0, 2**31)``; 0 (every sphere there from the start) by default.
 
     Raises:
         ValueError: naming the field and the index of the first bad entry.
     """
 
     def __init__(self, position, velocity, radius=0.05, mass=1.0, angular_momentum=None,
-                 orientation=None):
+                 orientation=None, birth_frame=0):
         self.position = check.frozen(check.vec3_array("position", position))
         n = self.position.shape[0]
         self.velocity = check.frozen(check.vec3_array("velocity", velocity, n))
@@ -34,6 +44,12 @@ class Swarm:
             else check.vec3_array("angular_momentum", angular_momentum, n))
         self.orientation = check.frozen(check.unit_quat_array(
             "orientation", (0.0, 0.0, 0.0, 1.0) if orientation is None else orientation, n))
+        self.birth_frame = check.frozen(check.frame_array("birth_frame", birth_frame, n))
+
+    @property
+    def has_births(self) -> bool:
+        """Whether some sphere is born after frame 0."""
+        return bool(np.any(self.birth_frame > 0))
 
     def __len__(self) -> int:
         return self.position.shape[0]

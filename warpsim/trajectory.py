@@ -29,6 +29,10 @@ class Trajectory:
             int64, or None for ``0 .. N-1`` (a trajectory of the whole swarm); set by
             :meth:`subset` and ``Simulator.run(..., spheres=...)``, written as the USD
             instancer's ``ids``.
+        birth_frame: the frame each of the N spheres is born at, shape (N,), int64, or None
+            when every sphere exists from frame 0. Before its birth a sphere does not exist:
+            its ``position``, ``orientation``, ``velocity`` and ``angular_velocity`` there are
+            NaN (:meth:`alive` is the mask), and USD writes it invisible.
     """
 
     frame: np.ndarray
@@ -40,12 +44,20 @@ class Trajectory:
     angular_velocity: np.ndarray | None = None
     events: object | None = None
     sphere_ids: np.ndarray | None = None
+    birth_frame: np.ndarray | None = None
 
     def ids(self) -> np.ndarray:
         """:attr:`sphere_ids`, or ``0 .. N-1`` when unset, (N,) int64."""
         if self.sphere_ids is None:
             return np.arange(self.sphere_count, dtype=np.int64)
         return np.asarray(self.sphere_ids, dtype=np.int64)
+
+    def alive(self) -> np.ndarray:
+        """Whether each sphere exists at each record (born at or before its frame), (F, N)."""
+        if self.birth_frame is None:
+            return np.ones((len(self), self.sphere_count), dtype=bool)
+        return (np.asarray(self.frame)[:, None]
+                >= np.asarray(self.birth_frame, dtype=np.int64)[None, :])
 
     @property
     def time(self) -> np.ndarray:
@@ -88,4 +100,6 @@ class Trajectory:
                           orientation=self.orientation[:, idx].copy(),
                           radius=self.radius[idx].copy(), velocity=pick(self.velocity),
                           angular_velocity=pick(self.angular_velocity), events=self.events,
-                          sphere_ids=self.ids()[idx].copy())
+                          sphere_ids=self.ids()[idx].copy(),
+                          birth_frame=(None if self.birth_frame is None
+                                       else np.asarray(self.birth_frame)[idx].copy()))

@@ -350,6 +350,29 @@ def index_list(name: str, value: Sequence[int] | np.ndarray, count: int) -> np.n
     return arr
 
 
+def frame_array(name: str, value, count: int) -> np.ndarray:
+    """Frame numbers: an integer broadcast to ``(count,)``, or ``(count,)`` integers, each in
+    ``[0, 2**31)``, as int64 (floats, even ``2.0``, and booleans refused)."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iu":
+        got = _short(value) if arr.ndim == 0 else f"an array of {arr.dtype}"
+        raise ValueError(f"{name} must be integers, got {got}")
+    if arr.ndim == 0:
+        arr = np.full(count, int(arr), dtype=np.int64)
+        label = name
+    elif arr.shape == (count,):
+        arr = arr.astype(np.int64)
+        label = None
+    else:
+        raise ValueError(f"{name} must be an integer or have shape ({count},), got {arr.shape}")
+    for bad, what in ((arr < 0, "must be >= 0"), (arr >= INT_LIMIT, "must be below 2**31")):
+        if bad.any():
+            i = first_bad_row(bad)
+            where = label if label is not None else f"{name}[{i}]"
+            raise ValueError(f"{where} {what}, got {arr[i]}")
+    return arr
+
+
 def frozen(arr: np.ndarray) -> np.ndarray:
     """Mark an owned array read-only, so validated data cannot drift after the check."""
     arr.setflags(write=False)
@@ -479,8 +502,18 @@ def emitter_fields(values: Mapping[str, object], where: str = "") -> dict[str, o
         direction = _tuple3(direction)
         cone = scalar(name("cone_deg"), 180.0 if values["cone_deg"] is None
                       else values["cone_deg"], minimum=0.0, maximum=180.0)
+    count = positive_int(name("count"), values["count"])
+    rate, duration = values.get("rate"), values.get("duration")
+    if rate is not None:
+        rate = scalar(name("rate"), rate, positive=True)
+    if duration is not None:
+        duration = scalar(name("duration"), duration, positive=True)
+    if rate is not None and duration is not None and round(rate * duration) != count:
+        raise ValueError(f"{name('rate')} x {name('duration')} = {rate * duration:g} spheres, "
+                         f"but {name('count')} is {count}: give one of rate and duration, or "
+                         f"both with rate x duration = count")
     return {
-        "count": positive_int(name("count"), values["count"]),
+        "count": count,
         "center": _tuple3(vec3(name("center"), values["center"])),
         "half_extents": _tuple3(nonnegative_vec3(name("half_extents"), values["half_extents"])),
         "radius": scalar_or_range(name("radius"), values["radius"], minimum=0.0),
@@ -494,6 +527,9 @@ def emitter_fields(values: Mapping[str, object], where: str = "") -> dict[str, o
         "angular_momentum": _tuple3(vec3(name("angular_momentum"), values["angular_momentum"])),
         "seed": positive_int(name("seed"), values["seed"], minimum=0),
         "clearance": scalar(name("clearance"), values["clearance"], minimum=0.0),
+        "start": scalar(name("start"), values.get("start", 0.0), minimum=0.0),
+        "rate": rate,
+        "duration": duration,
     }
 
 

@@ -175,7 +175,11 @@ def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, see
         sample: spheres compared, >= 1 (all of them when the swarm is smaller).
         seed: seed of the sample.
         horizon: simulated time compared [s]; default: the simulator's frames so far (or
-            ``DEFAULT_HORIZON`` before any), the trajectory's length.
+            ``DEFAULT_HORIZON`` before any), the trajectory's length. With births
+            (``swarm.birth_frame``) the sample is drawn among the spheres born before the
+            run's last frame, each is compared from its birth (the simulator's and the
+            reference's run of it both start there, with its state at birth), and the
+            horizon is at most the shortest life in the sample.
         contacts: contacts per sphere compared, >= 1.
         motion: the motion model of a trajectory (``"linear"`` by default); a simulator's own
             is used otherwise.
@@ -196,7 +200,23 @@ def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, see
     contacts = check.positive_int("contacts", contacts)
     seed = check.positive_int("seed", seed, minimum=0)
     n = len(swarm)
-    idx = np.sort(np.random.default_rng(seed).choice(n, size=min(sample, n), replace=False))
+    if not isinstance(sim_or_trajectory, (Simulator, Trajectory)):
+        raise ValueError("sim_or_trajectory must be a warpsim.Simulator or a warpsim.Trajectory, "
+                         f"got {type(sim_or_trajectory).__name__}")
+    births = swarm.birth_frame
+    if isinstance(sim_or_trajectory, Simulator):
+        end = sim_or_trajectory.frame or max(1, round(_horizon(horizon, DEFAULT_HORIZON)
+                                                      / float(sim_or_trajectory.dt)))
+    else:
+        end = int(sim_or_trajectory.frame[-1]) if len(sim_or_trajectory) else 0
+    lived = np.flatnonzero(births < end) if swarm.has_births else n  # spheres that moved
+    count = np.size(lived) if swarm.has_births else n
+    if count == 0:
+        raise ValueError(f"no sphere of the swarm is born before frame {end}: nothing to "
+                         f"compare")
+    idx = np.sort(np.random.default_rng(seed).choice(lived, size=min(sample, count),
+                                                     replace=False))
+    life = end - int(births[idx].max())  # frames the shortest-lived sampled sphere ran
     sub = _subswarm(swarm, idx)
     g = np.asarray(scene.gravity, dtype=np.float64)
     if isinstance(sim_or_trajectory, Simulator):
@@ -206,11 +226,13 @@ def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, see
         elapsed = sim.frame * dt
         horizon = _horizon(horizon, elapsed if sim.frame else DEFAULT_HORIZON)
         frames = max(1, round(horizon / dt))
+        if swarm.has_births:
+            frames = min(frames, life)
         position, velocity = record_every_frame(_like(sim, scene, sub), frames)
         settings = {"dt": dt, "precision": sim.precision, "max_bounces": sim.max_bounces,
                     "motion": motion, "source": "sampled spheres simulated again"}
         invariants = run_invariants(sim, scene, swarm)
-    elif isinstance(sim_or_trajectory, Trajectory):
+    else:
         traj = sim_or_trajectory
         if traj.sphere_count != n:
             raise ValueError(f"trajectory has {traj.sphere_count} spheres, swarm has {n}")
@@ -219,15 +241,14 @@ def compare(sim_or_trajectory, scene: Scene, swarm: Swarm, sample: int = 32, see
         dt = float(traj.dt)
         motion = motion or "linear"
         horizon = _horizon(horizon, float(traj.frame[-1]) * dt)
-        frames = min(int(traj.frame[-1]), max(1, round(horizon / dt)))
-        position = traj.position[:frames + 1, idx].astype(np.float64)
+        frames = min(life, max(1, round(horizon / dt)))
+        # each sphere's frames from its birth (frame b + k of the run is its own frame k)
+        position = np.stack([traj.position[b:b + frames + 1, i] for i, b in
+                             zip(idx, births[idx], strict=True)], axis=1).astype(np.float64)
         velocity = velocities_from_positions(position, dt, g, motion)
         settings = {"dt": dt, "precision": str(traj.position.dtype), "max_bounces": None,
                     "motion": motion, "source": "recorded trajectory"}
         invariants = trajectory_invariants(traj, scene)
-    else:
-        raise ValueError("sim_or_trajectory must be a warpsim.Simulator or a warpsim.Trajectory, "
-                         f"got {type(sim_or_trajectory).__name__}")
     times = np.arange(frames + 1) * dt
     horizon = float(times[-1])
     ref = simulate(scene, sub, horizon, times)
@@ -419,27 +440,33 @@ def match_contacts(found: ContactEvents, ref: ReferenceRun, spheres, k: int,
 
 
 def run_invariants(sim, scene: Scene, swarm: Swarm) -> dict:
-    """Energy drift, escaped, inside and capped counts of a simulator's whole swarm now."""
+    """Energy drift, escaped, inside and capped counts of a simulator's whole swarm now (the
+    spheres born so far)."""
     s = sim.state()
-    drift = np.abs(relative_change(sim, swarm.position, s))
+    born = swarm.birth_frame <= sim.frame
+    drift = np.abs(relative_change(sim, swarm.position, s))[born]
     stats = sim.stats
-    pos = s.position.astype(np.float64)
-    lossy = scene.energy_retention < 1.0  # energy is lost by design: no drift to speak of
-    return {"spheres": len(swarm), "frames": stats.frames,
+    pos = s.position.astype(np.float64)[born]
+    lossy = scene.energy_retention < 1.0 or not born.any()  # no drift to speak of
+    return {"spheres": int(born.sum()), "frames": stats.frames,
             "energy_drift_max": None if lossy else float(drift.max()),
             "energy_drift_median": None if lossy else float(np.median(drift)),
             "escaped": escaped(scene, pos, swarm.position),
-            "inside": inside(scene, pos, swarm.radius, sim.precision),
+            "inside": inside(scene, pos, swarm.radius[born], sim.precision),
             "capped_spheres": stats.capped_spheres, "capped_sphere_frames": stats.capped}
 
 
 def trajectory_invariants(traj: Trajectory, scene: Scene) -> dict:
-    pos = traj.position[-1].astype(np.float64)
+    born = traj.alive()[-1]
+    pos = traj.position[-1].astype(np.float64)[born]
     precision = "float32" if traj.position.dtype == np.float32 else "float64"
-    return {"spheres": traj.sphere_count, "frames": int(traj.frame[-1]),
+    first = np.searchsorted(traj.frame, np.zeros(traj.sphere_count, dtype=np.int64)
+                            if traj.birth_frame is None else traj.birth_frame)[born]
+    start = traj.position[first, np.flatnonzero(born)].astype(np.float64)
+    return {"spheres": int(born.sum()), "frames": int(traj.frame[-1]),
             "energy_drift_max": None, "energy_drift_median": None,
-            "escaped": escaped(scene, pos, traj.position[0].astype(np.float64)),
-            "inside": inside(scene, pos, traj.radius, precision),
+            "escaped": escaped(scene, pos, start),
+            "inside": inside(scene, pos, traj.radius[born], precision),
             "capped_spheres": None, "capped_sphere_frames": None}
 
 

@@ -196,6 +196,18 @@ def energy_line(sim, swarm, state) -> str:
     return energy_figures.line(energy_figures.figures(sim, swarm.position, state))
 
 
+def _unborn_written(args, scene, n: int, subset, start: int, end: int, every: int) -> int:
+    """Sphere-frames a run writes before their sphere's birth (0 without births)."""
+    if not getattr(scene.emitter, "emits_over_time", False):
+        return 0
+    births = scene.emitter.birth_frames(scene.dt if args.dt is None else args.dt, n)
+    if subset is not None:
+        births = births[subset]
+    recorded = np.array(sorted(set(range(start, end + 1, every)) | {end}), dtype=np.int64)
+    born = np.searchsorted(np.sort(births), recorded, side="right")  # born by each record
+    return int((births.size - born).sum())
+
+
 def _run_options(args) -> dict:
     """Keywords of :meth:`warpsim.Simulator.run` asked for on the command line, checked before
     anything runs."""
@@ -365,9 +377,12 @@ def _cmd_run(args) -> int:
     n_records = len(sorted(set(range(start, end + 1, every)) | {end}))
     from .. import export
 
-    spinning = bool(scene.friction > 0.0 or np.any(np.asarray(scene.emitter.angular_momentum) != 0.0))
+    spinning = bool(scene.friction > 0.0
+                    or np.any(np.asarray(scene.emitter.angular_momentum) != 0.0))
     estimate = export.estimate_usd_bytes(n_written, n_records, out.suffix, boxes=scene.boxes,
-                                         spinning=spinning, velocities=args.velocities)
+                                         spinning=spinning, velocities=args.velocities,
+                                         unborn=_unborn_written(args, scene, n, subset, start,
+                                                                end, every))
     if estimate > args.max_bytes:
         raise ValueError(f"{str(out)!r} would be about {estimate / 1e6:,.0f} MB "
                          f"({n_written} spheres x {n_records} frames), above --max-bytes "
@@ -384,7 +399,7 @@ def _cmd_run(args) -> int:
     from ..distributed.draw import DEFAULT_BLOCK, sharded_spawn
 
     swarm = sharded_spawn(scene, n, args.seed, DEFAULT_BLOCK if args.block is None
-                          else check.positive_int("block", args.block))
+                          else check.positive_int("block", args.block), dt=args.dt)
     extra = _simulator_options(args)
     sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
                        device=args.device, precision=args.precision,

@@ -98,7 +98,7 @@ def block_count(n: int, block: int = DEFAULT_BLOCK) -> int:
 
 
 def spawn_block(scene: Scene, n: int | None, seed: int | None, index: int,
-                block: int = DEFAULT_BLOCK) -> Swarm:
+                block: int = DEFAULT_BLOCK, dt: float | None = None) -> Swarm:
     """Spheres ``index * block`` to ``min((index + 1) * block, n)`` of the sharded draw.
 
     Args:
@@ -107,6 +107,8 @@ def spawn_block(scene: Scene, n: int | None, seed: int | None, index: int,
         seed: the run's seed (None: the emitter's).
         index: the block number, in ``[0, ceil(n / block))``.
         block: spheres per block.
+        dt: the run's frame duration [s] (None: the scene's), that an emitter emitting over
+            time counts its birth frames in: those of the block's spheres in the whole swarm.
 
     Returns:
         The block's spheres, each clear of every obstacle.
@@ -119,11 +121,15 @@ def spawn_block(scene: Scene, n: int | None, seed: int | None, index: int,
     index = check.positive_int("index", index, minimum=0, maximum=blocks - 1,
                                reason=f"{n} spheres make {blocks} blocks of {block}")
     size = min(block, n - index * block)
-    return scene.spawn(n=size, seed=block_seed(seed, index))
+    dt = scene.dt if dt is None else dt
+    swarm = scene.spawn(n=size, seed=block_seed(seed, index), dt=dt)
+    if not getattr(scene.emitter, "emits_over_time", False):
+        return swarm
+    return _with(swarm, birth_frame=scene.emitter.birth_frames(dt, n, index * block, size))
 
 
 def shard_swarm(scene: Scene, n: int | None, seed: int | None, start: int, stop: int,
-                block: int = DEFAULT_BLOCK) -> Swarm:
+                block: int = DEFAULT_BLOCK, dt: float | None = None) -> Swarm:
     """Spheres ``start`` to ``stop`` (excluded) of the sharded draw, made of whole blocks.
 
     Args:
@@ -139,26 +145,37 @@ def shard_swarm(scene: Scene, n: int | None, seed: int | None, start: int, stop:
         raise ValueError(f"spheres {start}..{stop} are not whole blocks of {block} (a shard "
                          f"starts and ends on a multiple of block, or ends at n = {n})")
     # the blocks drawn together (each as spawn_block draws it, bit for bit)
+    dt = scene.dt if dt is None else dt
     blocks = range(start // block, block_count(stop, block))
-    parts = scene.spawn_many([min(block, n - b * block) for b in blocks],
-                             [block_seed(seed, b) for b in blocks])
+    sizes = [min(block, n - b * block) for b in blocks]
+    parts = scene.spawn_many(sizes, [block_seed(seed, b) for b in blocks], dt=dt)
+    if getattr(scene.emitter, "emits_over_time", False):
+        parts = [_with(part, birth_frame=scene.emitter.birth_frames(dt, n, b * block, size))
+                 for part, b, size in zip(parts, blocks, sizes, strict=True)]
     return _joined(parts)
 
 
 def sharded_spawn(scene: Scene, n: int | None = None, seed: int | None = None,
-                  block: int = DEFAULT_BLOCK) -> Swarm:
+                  block: int = DEFAULT_BLOCK, dt: float | None = None) -> Swarm:
     """The whole swarm of the sharded draw, in one process: the spheres :func:`run` simulates,
     for a one-process run of the same spheres (``Simulator(scene, sharded_spawn(...))``)."""
     n, seed, block = check_draw(scene, n, seed, block)
-    return shard_swarm(scene, n, seed, 0, n, block)
+    return shard_swarm(scene, n, seed, 0, n, block, dt)
+
+
+SWARM_FIELDS = ("position", "velocity", "radius", "mass", "angular_momentum", "orientation",
+                "birth_frame")
+
+
+def _with(swarm: Swarm, **changes) -> Swarm:
+    return Swarm(**{name: changes.get(name, getattr(swarm, name)) for name in SWARM_FIELDS})
 
 
 def _joined(parts: list[Swarm]) -> Swarm:
     if len(parts) == 1:
         return parts[0]
     return Swarm(**{name: np.concatenate([getattr(p, name) for p in parts])
-                    for name in ("position", "velocity", "radius", "mass", "angular_momentum",
-                                 "orientation")})
+                    for name in SWARM_FIELDS})
 
 
 def plan_shards(n: int, shards: int, block: int = DEFAULT_BLOCK) -> list[tuple[int, int]]:

@@ -181,7 +181,7 @@ def simulate_shard(scene: Scene, spec: RunSpec, index: int,
 
     begin = time.perf_counter()
     start, stop = spec.bounds[index]
-    swarm = shard_swarm(scene, spec.n, spec.seed, start, stop, spec.block)
+    swarm = shard_swarm(scene, spec.n, spec.seed, start, stop, spec.block, spec.dt)
     sim = _simulator(scene, swarm, spec)
     size = stop - start
     if spec.start:
@@ -231,7 +231,8 @@ def _without_first(part):
 
     return Trajectory(frame=part.frame[1:], dt=part.dt, position=part.position[1:],
                       orientation=part.orientation[1:], radius=part.radius,
-                      velocity=cut(part.velocity), angular_velocity=cut(part.angular_velocity))
+                      velocity=cut(part.velocity), angular_velocity=cut(part.angular_velocity),
+                      birth_frame=part.birth_frame)
 
 
 def _concatenated(parts):
@@ -246,7 +247,8 @@ def _concatenated(parts):
 
     return Trajectory(frame=joined("frame"), dt=parts[0].dt, position=joined("position"),
                       orientation=joined("orientation"), radius=parts[0].radius,
-                      velocity=joined("velocity"), angular_velocity=joined("angular_velocity"))
+                      velocity=joined("velocity"), angular_velocity=joined("angular_velocity"),
+                      birth_frame=parts[0].birth_frame)
 
 
 def _scene_task(scene: Scene) -> Scene:
@@ -468,6 +470,11 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
     if isinstance(client, str) and client != LOCAL:
         client = scheduler_address(client)  # a bad address fails before any file is made
     out = check_writable(output, (".usdc", ".usda"), what="output")
+    stage_set = getattr(scene.boxes, "stage", None)  # a result composed over that set
+    if stage_set is not None:
+        from ..export.compose import check_output
+
+        check_output(stage_set, out)
     folder = shard_folder(out)
     if folder.exists() and not folder.is_dir():
         raise ValueError(f"shard folder {str(folder)!r} exists and is not a folder")
@@ -481,7 +488,7 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
                    scene_key=scene_key(scene))
     # Every setting is checked here, on one block, before a cluster starts: a bad dt, cap,
     # precision, broad phase, device or motion fails now, not in every task.
-    probe = _simulator(scene, spawn_block(scene, n, seed, 0, block), spec)
+    probe = _simulator(scene, spawn_block(scene, n, seed, 0, block, spec.dt), spec)
     spec = _replace(spec, dt=float(probe.dt), max_bounces=int(probe.max_bounces))
     records = spec.recorded_frames()
     if max_bytes is not None:
