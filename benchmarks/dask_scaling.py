@@ -1,13 +1,13 @@
-"""Sphere-frames per second of a sharded run against the number of Dask workers.
+"""Sphere-frames per second of a sharded run against the number of Dask processes.
 
-For each worker count, a ``LocalCluster`` of that many processes (one thread each) is started
-and warmed (every worker builds or loads the frame kernel once), then the same sharded run is
-timed: ``warpsim.distributed.run`` from the first task submitted to the root stage written,
+For each process count, a ``LocalCluster`` of that many worker processes (one thread each) is
+started and warmed (every process builds or loads the frame kernel once), then the same sharded
+run is timed: ``warpsim.distributed.run`` from the first task submitted to the root stage written,
 shard layers included. A one-process run of the same shards (``client=None``, one thread)
 is the baseline. Figures go to BENCHMARKS.md ("On a Dask cluster").
 
     python benchmarks/dask_scaling.py [--scene room] [-n 16384] [--frames 300] [--every 30]
-                                      [--workers 1,2] [--shards 8] [--json out.json]
+                                      [--processes 1,2] [--shards 8] [--json out.json]
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def _timed(scene, folder, args, client):
     seconds = time.perf_counter() - start
     return {"seconds": seconds, "sphere_frames": summary.sphere_frames,
             "sphere_frames_per_second": summary.sphere_frames / seconds,
-            "task_seconds": summary.task_seconds, "workers_used": summary.workers_used,
+            "task_seconds": summary.task_seconds, "processes_used": summary.processes_used,
             "shards": summary.shards, "digests": list(summary.digests)}
 
 
@@ -45,7 +45,8 @@ def main(argv=None) -> int:
     p.add_argument("-n", type=int, default=16384)
     p.add_argument("--frames", type=int, default=300)
     p.add_argument("--every", type=int, default=30)
-    p.add_argument("--workers", default="1,2")
+    p.add_argument("--processes", default="1,2",
+                   help="Dask process counts to time, comma-separated")
     p.add_argument("--shards", type=int, default=8)
     p.add_argument("--json", default=str(RESULTS / "dask_scaling.json"),
                    help="JSON results (default: benchmarks/results/dask_scaling.json)")
@@ -58,20 +59,20 @@ def main(argv=None) -> int:
         wd.run(scene, os.path.join(folder, "warm.usdc"), n=64, frames=2, block=16,
                progress=False)  # kernel built once in the cache before anything is timed
         here = _timed(scene, folder, args, None)
-        rows.append({"workers": 0, **here})
+        rows.append({"processes": 0, **here})
         print(f"in process      : {here['sphere_frames_per_second']:,.0f} sphere-frames/s "
               f"({here['seconds']:.2f} s)")
-        for count in [int(w) for w in args.workers.split(",")]:
+        for count in [int(w) for w in args.processes.split(",")]:
             with distributed.LocalCluster(n_workers=count, threads_per_worker=1, processes=True,
                                           dashboard_address=None) as cluster, \
                     distributed.Client(cluster) as client:
                 wd.run(scene, os.path.join(folder, "warm.usdc"), n=64 * count, frames=2,
                        block=16, shards=2 * count, client=client, progress=False)
-                row = {"workers": count, **_timed(scene, folder, args, client)}
+                row = {"processes": count, **_timed(scene, folder, args, client)}
             same = row["digests"] == here["digests"]
             rows.append(row)
-            print(f"{count} worker(s)    : {row['sphere_frames_per_second']:,.0f} "
-                  f"sphere-frames/s ({row['seconds']:.2f} s, {row['workers_used']} used; "
+            print(f"{count} process(es) : {row['sphere_frames_per_second']:,.0f} "
+                  f"sphere-frames/s ({row['seconds']:.2f} s, {row['processes_used']} used; "
                   f"bits equal to in-process: {same})")
     result = {"scene": args.scene, "n": args.n, "frames": args.frames, "every": args.every,
               "shards": args.shards, "machine": machine(), "rows": rows}

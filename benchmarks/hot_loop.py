@@ -5,7 +5,8 @@ Run from the repository root: ``python -m benchmarks.hot_loop [--against REV] [-
 
 A restructuring of the kernels (issue 16: scene data in structs, one candidate loop) must leave
 both the results and the hot loop's cost as they were. For each of float32/float64 and the
-linear/ballistic motion, the standard room (``warpsim.Scene.load("room")``, its emitter's swarm,
+linear/ballistic motion, the standard room (``warpsim.Scene.load("room")``, or the bundled scene
+``--scene`` names; its emitter's swarm,
 ``workers=1``, the broad phase ``auto`` picks) is advanced ``F`` frames by this checkout's
 package and by the package of git revision ``REV`` (exported with ``git archive`` into a
 temporary folder), each in its own process, the two taking turns ``R`` times. A process builds
@@ -45,7 +46,7 @@ import warp as wp
 wp.config.quiet = True
 import warpsim as ws
 prec, motion, n, frames, timings = sys.argv[1], sys.argv[2], *map(int, sys.argv[3:6])
-scene = ws.Scene.load("room")
+scene = ws.Scene.load(sys.argv[6])
 swarm = scene.spawn(n=n, seed=20240601)
 best = float("inf")
 for _ in range(timings):
@@ -80,14 +81,14 @@ def export_tree(rev: str, root: Path) -> Path:
 
 
 def measure(site: Path | None, prec: str, motion: str, n: int, frames: int,
-            timings: int) -> dict:
+            timings: int, scene: str = "room") -> dict:
     """One process's best time; ``site`` None is this checkout's installed package."""
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = str(site)
     out = subprocess.run([sys.executable, "-c", CHILD, prec, motion, str(n), str(frames),
-                          str(timings)], check=True, capture_output=True, text=True, env=env,
-                         cwd=tempfile.gettempdir())
+                          str(timings), scene], check=True, capture_output=True, text=True,
+                         env=env, cwd=tempfile.gettempdir())
     result = json.loads(out.stdout.strip().splitlines()[-1])
     if site is not None and not result["file"].startswith(str(site)):
         raise RuntimeError(f"the revision's process imported {result['file']}")
@@ -98,6 +99,8 @@ def main(argv=None) -> None:
     p = parser("hot_loop", __doc__)
     p.add_argument("--against", default="main", help="git revision to compare with (main)")
     p.add_argument("--repeats", type=int, default=None, help="turns per side (default 5)")
+    p.add_argument("--scene", default="room",
+                   help="bundled scene to advance (default room; plates is the ballistic one)")
     p.add_argument("--cases", default=None,
                    help="comma-separated PRECISION/MOTION pairs (default: all four)")
     args = p.parse_args(argv)
@@ -116,7 +119,7 @@ def main(argv=None) -> None:
             hashes = {}
             for _ in range(repeats):
                 for side, where in (("base", site), ("this", None)):
-                    r = measure(where, prec, motion, n, frames, 3)
+                    r = measure(where, prec, motion, n, frames, 3, args.scene)
                     best[side] = min(best[side], r["seconds"])
                     hashes[side] = r["hash"]
             ns = {k: v / (n * frames) * 1e9 for k, v in best.items()}
@@ -126,13 +129,14 @@ def main(argv=None) -> None:
                          "identical": "yes" if hashes["this"] == hashes["base"] else "NO",
                          "base_s": best["base"], "this_s": best["this"]})
             print(f"  {prec} {motion}: {ns['base']:.2f} -> {ns['this']:.2f} ns", flush=True)
-    print_table(f"Frame kernel, standard room, N = {n:,}, F = {frames}, one core, best of "
+    print_table(f"Frame kernel, scene {args.scene}, N = {n:,}, F = {frames}, one core, best of "
                 f"{repeats} x 3: {rev} against this checkout",
                 rows, [("precision", "precision", "s"), ("motion", "motion", "s"),
                        ("broad phase", "broad_phase", "s"),
                        (f"{rev} [ns]", "base_ns", ".2f"), ("this [ns]", "this_ns", ".2f"),
                        ("ratio", "ratio", ".3f"), ("identical", "identical", "s")])
-    finish(out, {"machine": info, "against": rev, "spheres": n, "frames": frames,
+    finish(out, {"machine": info, "against": rev, "scene": args.scene, "spheres": n,
+                 "frames": frames,
                  "repeats": repeats, "rows": rows}, started)
 
 

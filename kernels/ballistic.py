@@ -1,4 +1,4 @@
-"""One frame of exact ballistic motion: the per-sphere multi-bounce loop along parabolas.
+"""One frame of exact ballistic motion: the per-sphere loop along parabolas and supports.
 
 From its position the sphere follows ``x(s) = a + v s + 1/2 g s^2`` with its *true* velocity
 ``v``; at the nearest contact it reflects (``v' = v - 2 (v . n) n`` with the velocity at the
@@ -8,18 +8,28 @@ reflected velocity, counted as capped, as in the linear model). The velocity ret
 true velocity at the frame's end. Spin (``dynamics.friction_spin``) and ``energy_retention``
 are applied at each contact exactly as in :mod:`bounce`.
 
-Resting and sliding contacts (supports). A contact is a support when gravity presses the sphere
-onto the surface (``g . n < 0``) and its normal speed is at most ``RESTING_SPEED`` or the hop the
-bounce would start is shorter than ``dt / max_bounces`` (one the bounce cap could not follow
-through the frame): the normal part of the velocity is removed (the energy drops by exactly that
-kinetic energy) and, for the rest of the frame, the sphere moves with the part of gravity along
-the surface's tangent plane, ``g - (g . n) n``: exact on a flat face, a sphere at rest stays bit
-for bit, one on a slope slides. A second support on another plane slides along their crease; a
-third stops the sphere for the rest of the frame. A bounce that sends the sphere off its support
-gives it back the whole of gravity. Hops therefore never shrink without end within a frame (no
-Zeno loop). Known limit: a sphere sliding off the edge of a face keeps the tangential gravity
-until the frame ends (it falls at most ``|g| dt^2 / 2`` late) and slides on a curved (edge or
-corner) support along its tangent plane; the next frame's contact puts it back on the surface.
+Supports (resting and sliding contacts). A contact is a support when gravity presses the sphere
+onto the surface (``g . n < 0``) and its normal speed is at most ``RESTING_SPEED`` (a hop of at
+most 1.3 micrometres; the exact reference's rule): the normal part of the velocity is removed
+(the energy drops by exactly that kinetic energy), whatever ``dt`` and ``max_bounces``. Then,
+frictionless and exact (:mod:`slide`):
+
+- on a face the sphere slides along the face-frame parabola with gravity's tangential part until
+  its contact point leaves the face (the first root of that parabola on the face rectangle's
+  border); there the edge decides: free flight when ``|v_perp|^2 / R > -g . n``, else a curved
+  slide. A sphere at rest stays bit for bit, one on a slope slides;
+- on a rounded edge or corner (the rounded box's curved part, radius ``R = rb + r`` about the
+  core's edge or corner) it follows the surface until the normal force vanishes (then free
+  flight in the same frame), it reaches an adjacent face (a face support when gravity presses)
+  or it meets another box; a contact on a curved part with no normal force (an arc tangent to
+  it) is free flight;
+- a second support on another plane slides along their crease (a curved support by its tangent
+  plane), a third stops the sphere for the rest of the frame; these slides end with the frame.
+
+Each support start counts as a contact against ``max_bounces``. A bounce that sends the sphere
+off its support gives it back the whole of gravity. Hops below ``RESTING_SPEED`` do not happen,
+so a lossy ball comes to rest after finitely many bounces (no Zeno loop); a frame holding more
+of its last hops than ``max_bounces`` is capped.
 """
 
 from functools import cache
@@ -32,6 +42,7 @@ from .contact import contact_funcs
 from .data import Features, model_structs
 from .nearest_arc import model_nearest_hit_arc, nearest_arc_funcs
 from .precision import precision
+from .slide import LEG_DETACH, LEG_END, LEG_REGION, SHARP_SLIDE_ULPS, slide_funcs
 
 #: A contact with a normal speed at most this [m/s] while gravity presses the sphere onto the
 #: surface is a support: a hop of at most 1.3 micrometres, the exact reference's threshold.
@@ -41,13 +52,26 @@ RESTING_SPEED = 5.0e-3
 #: new one replaces the old one instead of making a crease.
 COPLANAR_REL = 1.0e-6
 
+#: A contact on a curved part that cannot hold the sphere (no normal force) whose normal speed
+#: is at most this many square-root ulps of its speed is a tangent touch: the sweep resolves a
+#: double root only to ``sqrt(eps)``, so the arc flies on unchanged (a larger one bounces).
+TOUCH_SQRT_ULPS = 64.0
+
+#: What a sphere's motion is within the frame: free flight, a slide on a face (its exit
+#: tracked), a slide on planes (a crease, a wedge: to the frame's end), a curved slide.
+FREE = 0
+FACE = 1
+PLANE = 2
+CURVED = 3
+
 
 @cache
 def ballistic_funcs(features: Features) -> SimpleNamespace:
-    """Build the ballistic bounce loop for one feature set (``precision``, ``spin``, ``lossy``,
+    """Build the ballistic loop for one feature set (``precision``, ``spin``, ``lossy``,
     ``broad_phase`` and ``events`` are read; see ``nearest_arc.model_nearest_hit_arc``). Events
     are written as ``bounce.bounce_funcs`` writes them, the fraction being of the frame's time,
-    exact here.
+    exact here; a support start (a face slide reaching an edge, a curved slide reaching a face)
+    is a row with ``resting`` 1 and normal speed 0.
 
     Returns:
         Namespace with ``ballistic_path``.
@@ -59,13 +83,19 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
     arc_contact_centre = nearest_arc_funcs(p).arc_contact_centre
     arc_point = arc_funcs(p).arc_point
     on_contact = contact_funcs(p, features.spin, features.lossy, features.events)
+    slide = slide_funcs(p, features.broad_phase)
+    face_exit, feature_of, normal_force = slide.face_exit, slide.feature_of, slide.normal_force
+    escape_time, nearest_except, curved_leg = (slide.escape_time, slide.nearest_except,
+                                               slide.curved_leg)
     ZERO = scalar(0.0)
     HALF = scalar(0.5)
+    ONE = scalar(1.0)
     TWO = scalar(2.0)
     RESTING = scalar(RESTING_SPEED)
     COPLANAR = scalar(1.0 - COPLANAR_REL)
     TANGENT_REL = scalar(p.tangent_rel)
-    HALF_HOP = scalar(0.5)  # the hop of a bounce lasts 2 |u.n| / |g.n|: half of it per cap
+    SHARP_SLIDE = scalar(SHARP_SLIDE_ULPS * p.eps)
+    TOUCH = scalar(TOUCH_SQRT_ULPS * p.eps ** 0.5)
 
     @wp.func
     def along_plane(x: vec3, n: vec3):
@@ -73,10 +103,400 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         return x - wp.dot(x, n) * n
 
     @wp.func
+    def box_frame(boxes: Boxes, k: int, x: vec3, v: vec3, g: vec3):
+        """Point ``x`` [m], velocity ``v`` and acceleration ``g`` in box ``k``'s frame."""
+        to_local = wp.transpose(boxes.rotation[k])
+        return to_local * (x - boxes.center[k]), to_local * v, to_local * g
+
+    @wp.func
+    def dominant_axis(n: vec3):
+        """The local axis of the largest component of the unit ``n``, and its sign."""
+        axis = int(0)
+        for i in range(1, 3):
+            if wp.abs(n[i]) > wp.abs(n[axis]):
+                axis = i
+        side = ONE
+        if n[axis] < ZERO:
+            side = -ONE
+        return axis, side
+
+    @wp.func(inline=False)
+    def holds_on(x: vec3, v: vec3, g: vec3, h: vec3, big_r: scalar, mask: vec3, sig: vec3):
+        """Whether a sphere on the curved feature ``(mask, sig)`` with velocity ``v`` (all
+        local) is pressed onto it: a positive normal force and a resolvable radius."""
+        cf = wp.cw_mul(mask, wp.cw_mul(sig, h))
+        w = wp.cw_mul(mask, x - cf)
+        out = int(0)
+        size = wp.length(w)
+        if big_r > SHARP_SLIDE * wp.max(wp.max(h[0], h[1]), wp.max(h[2], size)) and size > ZERO:
+            n = w / size
+            u = wp.cw_mul(mask, v)
+            u = u - wp.dot(u, n) * n
+            if normal_force(w, u, wp.cw_mul(mask, g), big_r) > ZERO:
+                out = 1
+        return out
+
+    @wp.struct
+    class Support:
+        """What holds a sphere within the frame (``ballistic_path``'s loop state)."""
+
+        mode: int
+        """``FREE``, ``FACE``, ``PLANE`` or ``CURVED``."""
+        supports: int
+        """Planar supports: 1 on a face, 1 to 3 on planes (a crease, a wedge)."""
+        n1: wp.types.vector(3, scalar)
+        """The first planar support's unit normal, world."""
+        n2: wp.types.vector(3, scalar)
+        """The second's."""
+        box: int
+        """FACE, CURVED: the support's box."""
+        face_axis: int
+        """FACE: the face's local normal axis."""
+        face_side: scalar
+        """FACE: its side, +-1."""
+        mask: wp.types.vector(3, scalar)
+        """CURVED: the feature's constrained local axes (``slide.feature_of``)."""
+        sig: wp.types.vector(3, scalar)
+        """CURVED: their sides."""
+        escape_box: int
+        """Free flight just off this box's curved part (-1: none) ..."""
+        escape_left: scalar
+        """... which it cannot touch again for this long [s]."""
+        g_eff: wp.types.vector(3, scalar)
+        """The acceleration of the free or planar legs [m/s^2]: gravity, or its part along
+        the support's plane or crease."""
+
+    @wp.func(inline=True)
+    def free_support(g: vec3):
+        """Nothing holds the sphere: free flight under ``g``."""
+        st = Support()
+        st.mode = FREE
+        st.supports = 0
+        st.n1 = vec3(ZERO, ZERO, ZERO)
+        st.n2 = vec3(ZERO, ZERO, ZERO)
+        st.box = -1
+        st.face_axis = 0
+        st.face_side = ONE
+        st.mask = vec3(ZERO, ZERO, ZERO)
+        st.sig = vec3(ONE, ONE, ONE)
+        st.escape_box = -1
+        st.escape_left = ZERO
+        st.g_eff = g
+        return st
+
+    @wp.func(inline=False)
+    def held_leg(st: Support, a: vec3, v: vec3, g: vec3, rest: scalar, r: scalar, boxes: Boxes,
+                 broad: BroadPhase):
+        """One leg of a sphere on a face, on a curved part, or just off one (out of line: a
+        free sphere never runs it).
+
+        Returns:
+            ``(kind, box, n, contact, u, a, v, rest, st)``: ``kind`` 0 the frame is done, 1 a
+            contact with ``box`` (normal ``n``, centre ``contact``, velocity ``u`` there), 2 a
+            support may start on ``st.box``'s feature ``(st.mask, st.sig)`` at ``a``, 3 go on.
+        """
+        kind = int(3)
+        box = int(-1)
+        n = vec3(ZERO, ZERO, ZERO)
+        contact = a
+        u = v
+        if st.mode == CURVED:
+            leg, s, a, v, mask, sig, hit_box, hit_n, n_sup = curved_leg(
+                a, v, g, rest, r, boxes, broad, st.box, st.mask, st.sig)
+            st.mask = mask
+            st.sig = sig
+            rest = wp.max(rest - s, ZERO)
+            if leg == LEG_END:
+                kind = 0
+            elif leg == LEG_DETACH:
+                b = st.box
+                st = free_support(g)
+                xl, vl, gl = box_frame(boxes, b, a, v, g)
+                st.escape_box = b
+                st.escape_left = escape_time(xl, vl, gl, rest, boxes.half_extents[b],
+                                             boxes.radius[b] + r, mask, sig)
+            elif leg == LEG_REGION:
+                kind = 2
+            else:
+                kind = 1
+                box = hit_box
+                n = hit_n
+                contact = a
+                u = v
+                st.n1 = n_sup  # the curved support's tangent plane, for a crease
+        else:
+            tau = rest
+            skip = st.escape_box
+            s = tau
+            if skip >= 0:
+                tau = wp.min(st.escape_left, rest)
+                st.escape_box = -1
+                box, s, n = nearest_except(a, v, st.g_eff, tau, r, boxes, broad, skip)
+            else:
+                box, s, n = nearest_hit_arc(a, v, st.g_eff, tau, r, boxes, broad)
+            s_exit = tau
+            exit_axis = int(-1)
+            exit_side = ONE
+            if st.mode == FACE:
+                xl, vl, gl = box_frame(boxes, st.box, a, v, st.g_eff)
+                s_exit, exit_axis, exit_side = face_exit(
+                    xl, vl, gl, tau, boxes.half_extents[st.box], st.face_axis)
+            if exit_axis >= 0 and s_exit < s:
+                # the contact point leaves the face: the edge decides what follows
+                a = arc_point(a, v, st.g_eff, s_exit)
+                v = v + s_exit * st.g_eff
+                rest = wp.max(rest - s_exit, ZERO)
+                mask = vec3(ZERO, ZERO, ZERO)
+                mask[st.face_axis] = ONE
+                mask[exit_axis] = ONE
+                sig = vec3(ONE, ONE, ONE)
+                sig[st.face_axis] = st.face_side
+                sig[exit_axis] = exit_side
+                st.mask = mask
+                st.sig = sig
+                kind = 2
+            elif box < 0:
+                a = arc_point(a, v, st.g_eff, tau)
+                v = v + tau * st.g_eff
+                if tau >= rest:
+                    kind = 0
+                rest = wp.max(rest - tau, ZERO)
+            else:
+                kind = 1
+                contact = arc_contact_centre(a, v, st.g_eff, s, n, boxes.radius[box] + r,
+                                             boxes.extent[box])
+                u = v + s * st.g_eff
+                rest = wp.max(rest - s, ZERO)
+        return kind, box, n, contact, u, a, v, rest, st
+
+    @wp.func(inline=False)
+    def start_support(st: Support, a: vec3, v: vec3, g: vec3, rest: scalar, r: scalar,
+                      boxes: Boxes):
+        """Whether the feature ``(st.mask, st.sig)`` of ``st.box`` that the centre ``a`` just
+        reached holds the sphere (velocity ``v``): a face gravity presses on, a curved part
+        with a normal force. Out of line.
+
+        Returns:
+            ``(holds, st, v, n)``: the support state (free flight, with the escape of a curved
+            part, when it does not hold), the velocity along it and its world normal.
+        """
+        xl, vl, gl = box_frame(boxes, st.box, a, v, g)
+        h = boxes.half_extents[st.box]
+        big_r = boxes.radius[st.box] + r
+        mask = st.mask
+        sig = st.sig
+        count = int(mask[0] + mask[1] + mask[2])
+        holds = int(0)
+        n_w = vec3(ZERO, ZERO, ZERO)
+        axis = int(0)
+        if count == 1:
+            axis, side = dominant_axis(mask)
+            n_l = vec3(ZERO, ZERO, ZERO)
+            n_l[axis] = sig[axis]
+            n_w = boxes.rotation[st.box] * n_l
+            if wp.dot(g, n_w) < -TANGENT_REL * wp.length(g):
+                holds = 1
+        else:
+            holds = holds_on(xl, vl, gl, h, big_r, mask, sig)
+            cf = wp.cw_mul(mask, wp.cw_mul(sig, h))
+            n_w = boxes.rotation[st.box] * wp.normalize(wp.cw_mul(mask, xl - cf))
+        b = st.box
+        if holds == 0:
+            st = free_support(g)
+            if count > 1:
+                st.escape_box = b
+                st.escape_left = escape_time(xl, vl, gl, rest, h, big_r, mask, sig)
+        elif count == 1:
+            st.mode = FACE
+            st.face_axis = axis
+            st.face_side = sig[axis]
+            st.supports = 1
+            st.n1 = n_w
+            st.g_eff = along_plane(g, n_w)
+            v = along_plane(v, n_w)
+        else:
+            st.mode = CURVED
+            st.supports = 0
+            st.g_eff = g
+        return holds, st, v, n_w
+
+    @wp.func(inline=False)
+    def support_contact(st: Support, u: vec3, n: vec3, un: scalar, contact: vec3, box: int,
+                        rest: scalar, r: scalar, g: vec3, boxes: Boxes):
+        """A contact with gravity pressing and at most ``RESTING_SPEED`` of normal speed: a
+        support on a face (a face slide), a curved part (a curved slide), a second plane (the
+        crease) or a third (wedged); a curved part with no normal force does not hold it (a
+        tangent touch flies on, else it bounces). Out of line.
+
+        Returns:
+            ``(held, graze, st, u)``: ``held`` 1 for a support (``u`` along it), ``graze`` 1 for
+            a tangent touch (``u`` unchanged); both 0: a bounce (``st`` unchanged).
+        """
+        held = int(0)
+        graze = int(0)
+        out = st
+        if out.mode == CURVED:
+            out.supports = 1  # its tangent plane (n1) against this new support
+        single = int(0)
+        if out.supports == 0 or (out.supports == 1 and wp.dot(n, out.n1) >= COPLANAR):
+            single = 1
+        elif out.supports == 1:
+            if wp.dot(along_plane(g, n), out.n1) >= ZERO and wp.dot(
+                    along_plane(u, n), out.n1) >= ZERO:
+                single = 1  # sliding off the old plane onto the new one
+        if single == 1:
+            xl, vl, gl = box_frame(boxes, box, contact, u, g)
+            h = boxes.half_extents[box]
+            big_r = boxes.radius[box] + r
+            f_mask, f_sig, count = feature_of(xl, h, big_r)
+            if count <= 1:
+                held = 1
+                out.mode = FACE
+                out.box = box
+                axis, side = dominant_axis(wp.transpose(boxes.rotation[box]) * n)
+                out.face_axis = axis
+                out.face_side = side
+                out.supports = 1
+                out.n1 = n
+                out.g_eff = along_plane(g, n)
+                u = along_plane(u, n)
+            elif holds_on(xl, vl, gl, h, big_r, f_mask, f_sig) == 1:
+                held = 1
+                out.mode = CURVED
+                out.box = box
+                out.mask = f_mask
+                out.sig = f_sig
+                out.supports = 0
+                out.g_eff = g
+                u = along_plane(u, n)
+            elif -un <= TOUCH * wp.length(u):
+                # tangent to a curved part (within the sweep's resolution of a double root)
+                graze = 1
+                out = free_support(g)
+                out.escape_box = box
+                out.escape_left = escape_time(xl, vl, gl, rest, h, big_r, f_mask, f_sig)
+            else:
+                out = st
+        elif out.supports == 1:  # along the crease of the two planes
+            held = 1
+            out.mode = PLANE
+            out.supports = 2
+            out.n2 = n
+            crease = wp.normalize(wp.cross(out.n1, n))
+            out.g_eff = wp.dot(g, crease) * crease
+            u = wp.dot(u, crease) * crease
+        else:  # wedged by three supports
+            held = 1
+            out.mode = PLANE
+            out.g_eff = vec3(ZERO, ZERO, ZERO)
+            u = vec3(ZERO, ZERO, ZERO)
+        return held, graze, out, u
+
+    @wp.func(inline=False)
+    def general_step(st: Support, a: vec3, v: vec3, L: vec3, energy: scalar, rest: scalar,
+                     bounces: int, capped: int, supported: int, r: scalar, m: scalar,
+                     physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
+                     sphere: int, events: EventBuffer, pre_box: int, pre_s: scalar,
+                     pre_n: vec3):
+        """One pass of :func:`ballistic_path`'s loop for a sphere held by a support or just
+        off one, or at a contact that may be a support (``pre_box >= 0``: the free leg's
+        contact, ``pre_s`` [s] along it with normal ``pre_n``). Out of line, so the free
+        flight's loop stays small.
+
+        Returns:
+            ``(a, v, L, energy, rest, bounces, capped, supported, done, st)``.
+        """
+        g = physics.gravity
+        dt = physics.dt
+        max_bounces = physics.max_bounces
+        done = int(0)
+        kind = int(1)  # 0 done, 1 a contact, 2 a support may start, 3 go on
+        box = int(-1)
+        n = vec3(ZERO, ZERO, ZERO)
+        contact = a
+        u = v
+        if pre_box >= 0 or st.mode == FREE and st.escape_box < 0 or st.mode == PLANE:
+            box = pre_box
+            s = pre_s
+            n = pre_n
+            if pre_box < 0:
+                box, s, n = nearest_hit_arc(a, v, st.g_eff, rest, r, boxes, broad)
+            if box < 0:
+                a = arc_point(a, v, st.g_eff, rest)
+                v = v + rest * st.g_eff
+                kind = 0
+            else:
+                contact = arc_contact_centre(a, v, st.g_eff, s, n, boxes.radius[box] + r,
+                                             boxes.extent[box])
+                u = v + s * st.g_eff
+                rest = wp.max(rest - s, ZERO)
+        else:
+            kind, box, n, contact, u, a, v, rest, st = held_leg(st, a, v, g, rest, r,
+                                                                boxes, broad)
+        if kind == 0:
+            done = 1
+        elif kind == 2:
+            holds, st_new, v_new, n_w = start_support(st, a, v, g, rest, r, boxes)
+            if holds == 0:
+                st = st_new
+            elif bounces >= max_bounces:
+                capped = 1
+                done = 1
+            else:
+                bounces += 1
+                supported += 1
+                on_contact.event(frame, sphere, st.box, 1, a, n_w, (dt - rest) / dt,
+                                 ZERO, events)
+                st = st_new
+                energy = energy - HALF * m * (wp.dot(v, v) - wp.dot(v_new, v_new))
+                v = v_new
+        elif kind == 1:
+            if bounces >= max_bounces:
+                capped = 1  # time left and a contact ahead: stay at the last contact
+                done = 1
+            else:
+                bounces += 1
+                L = on_contact.spin(L, u, n, r, m, physics)
+                un = wp.dot(u, n)
+                keep = on_contact.keep(physics)
+                held = int(0)
+                graze = int(0)
+                # a support: gravity presses and the normal speed is at most RESTING_SPEED
+                if wp.dot(g, n) < -TANGENT_REL * wp.length(g) and -un <= RESTING:
+                    held, graze, st, u_s = support_contact(st, u, n, un, contact, box,
+                                                           rest, r, g, boxes)
+                    if held == 1:
+                        supported += 1
+                        energy = energy - HALF * m * (wp.dot(u, u) - wp.dot(u_s, u_s))
+                        v = u_s
+                    elif graze == 1:
+                        v = u
+                if held == 0 and graze == 0:
+                    v = u - TWO * un * n
+                    if wp.static(features.lossy):
+                        energy = on_contact.loss(energy, m, contact, physics)
+                        v = v * keep
+                    if st.mode == CURVED:
+                        st.mode = FREE
+                        st.g_eff = g
+                    if st.supports > 0:
+                        speed = wp.length(v)
+                        leaves = wp.dot(v, st.n1) > TANGENT_REL * speed
+                        if st.supports == 2:
+                            leaves = leaves or wp.dot(v, st.n2) > TANGENT_REL * speed
+                        if leaves:  # off its support: the whole of gravity again
+                            st = free_support(g)
+                on_contact.event(frame, sphere, box, held, contact, n, (dt - rest) / dt,
+                                 -un, events)
+                a = contact
+        return a, v, L, energy, rest, bounces, capped, supported, done, st
+
+    @wp.func(inline=True)
     def ballistic_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
                        physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
                        sphere: int, events: EventBuffer):
-        """Move a sphere for one frame along its parabolas, bouncing up to ``max_bounces`` times.
+        """Move a sphere for one frame along its parabolas and supports, up to ``max_bounces``
+        contacts.
 
         Args:
             a: centre at the frame's start [m]. v: true velocity at the frame's start [m/s].
@@ -89,88 +509,57 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         Returns:
             ``(position, velocity, L, energy, bounces, capped, supported)``: the true velocity
             at the frame's end; ``energy`` lowered by the losses (``retention``) and by the
-            normal kinetic energy a support removes; ``bounces`` counts the contacts taken,
-            ``capped`` is 1 when the cap stopped the sphere at its last contact, ``supported``
-            is 1 when one of them was a support.
+            normal kinetic energy a support removes; ``bounces`` counts the contacts taken
+            (support starts included), ``capped`` is 1 when the cap stopped the sphere,
+            ``supported`` counts the support contacts.
+
+        Free flight and plain bounces run here; supports, and what follows them, in
+        :func:`general_step`.
         """
         g = physics.gravity
         dt = physics.dt
         max_bounces = physics.max_bounces
         rest = dt  # time left in the frame [s]
-        g_eff = g  # gravity the sphere feels: its tangential part while supported
-        supports = int(0)
-        n1 = vec3(ZERO, ZERO, ZERO)
-        n2 = vec3(ZERO, ZERO, ZERO)
+        st = free_support(g)
         bounces = int(0)
         capped = int(0)
         supported = int(0)
         done = int(0)
         while done == 0:
-            box, s, n = nearest_hit_arc(a, v, g_eff, rest, r, boxes, broad)
-            if box < 0:
-                a = arc_point(a, v, g_eff, rest)
-                v = v + rest * g_eff
-                done = 1
-            elif bounces >= max_bounces:
-                capped = 1  # time left and a contact ahead: stay at the last contact
-                done = 1
-            else:
-                bounces += 1
-                contact = arc_contact_centre(a, v, g_eff, s, n, boxes.radius[box] + r,
-                                             boxes.extent[box])
-                u = v + s * g_eff
-                rest = wp.max(rest - s, ZERO)
-                L = on_contact.spin(L, u, n, r, m, physics)
-                un = wp.dot(u, n)
-                gn = wp.dot(g, n)
-                keep = on_contact.keep(physics)
-                # a support: gravity presses, and the normal speed is below RESTING_SPEED or the
-                # hop would last less than dt / max_bounces (2 keep |un| / |gn|)
-                resting = gn < -TANGENT_REL * wp.length(g) and (
-                    -un <= wp.max(RESTING, -gn * dt * HALF_HOP / (scalar(wp.max(max_bounces, 1))
-                                                                * keep)))
-                on_contact.event(frame, sphere, box, int(resting), contact, n,
-                                 (dt - rest) / dt, -un, events)
-                if resting:
-                    supported += 1
-                    u_sq = wp.dot(u, u)
-                    if supports == 0 or (supports == 1 and wp.dot(n, n1) >= COPLANAR):
-                        supports = 1
-                        n1 = n
-                        g_eff = along_plane(g, n)
-                        u = along_plane(u, n)
-                    elif supports == 1:
-                        g_t = along_plane(g, n)
-                        u_t = along_plane(u, n)
-                        if wp.dot(g_t, n1) >= ZERO and wp.dot(u_t, n1) >= ZERO:
-                            n1 = n  # sliding off the old plane onto the new one
-                            g_eff = g_t
-                            u = u_t
-                        else:  # along the crease of the two planes
-                            supports = 2
-                            n2 = n
-                            crease = wp.normalize(wp.cross(n1, n2))
-                            g_eff = wp.dot(g, crease) * crease
-                            u = wp.dot(u, crease) * crease
-                    else:  # wedged by three supports
-                        g_eff = vec3(ZERO, ZERO, ZERO)
-                        u = vec3(ZERO, ZERO, ZERO)
-                    energy = energy - HALF * m * (u_sq - wp.dot(u, u))
-                    v = u
+            if st.mode == FREE and st.escape_box < 0:
+                box, s, n = nearest_hit_arc(a, v, g, rest, r, boxes, broad)
+                if box < 0:
+                    a = arc_point(a, v, g, rest)
+                    v = v + rest * g
+                    done = 1
+                elif bounces >= max_bounces:
+                    capped = 1  # time left and a contact ahead: stay at the last contact
+                    done = 1
                 else:
-                    v = u - TWO * un * n
-                    if wp.static(features.lossy):
-                        energy = on_contact.loss(energy, m, contact, physics)
-                        v = v * keep
-                    if supports > 0:
-                        speed = wp.length(v)
-                        leaves = wp.dot(v, n1) > TANGENT_REL * speed
-                        if supports == 2:
-                            leaves = leaves or wp.dot(v, n2) > TANGENT_REL * speed
-                        if leaves:  # off its support: the whole of gravity again
-                            supports = 0
-                            g_eff = g
-                a = contact
+                    u = v + s * g
+                    un = wp.dot(u, n)
+                    if wp.dot(g, n) < -TANGENT_REL * wp.length(g) and -un <= RESTING:
+                        a, v, L, energy, rest, bounces, capped, supported, done, st = (
+                            general_step(st, a, v, L, energy, rest, bounces, capped,
+                                         supported, r, m, physics, boxes, broad, frame, sphere,
+                                         events, box, s, n))
+                    else:  # a bounce
+                        bounces += 1
+                        contact = arc_contact_centre(a, v, g, s, n, boxes.radius[box] + r,
+                                                     boxes.extent[box])
+                        rest = wp.max(rest - s, ZERO)
+                        L = on_contact.spin(L, u, n, r, m, physics)
+                        v = u - TWO * un * n
+                        if wp.static(features.lossy):
+                            energy = on_contact.loss(energy, m, contact, physics)
+                            v = v * on_contact.keep(physics)
+                        on_contact.event(frame, sphere, box, 0, contact, n, (dt - rest) / dt,
+                                         -un, events)
+                        a = contact
+            else:
+                a, v, L, energy, rest, bounces, capped, supported, done, st = general_step(
+                    st, a, v, L, energy, rest, bounces, capped, supported, r, m, physics, boxes,
+                    broad, frame, sphere, events, -1, ZERO, vec3(ZERO, ZERO, ZERO))
         return a, v, L, energy, bounces, capped, supported
 
     return SimpleNamespace(ballistic_path=ballistic_path)

@@ -1,6 +1,7 @@
 """Shared helpers of the tests (imported as ``helpers``): the devices to test on, a tolerance
-table per precision, and scenes built by hand."""
+table per precision, scenes built by hand, and every kernel variant the factories make."""
 
+import itertools
 import os
 
 import numpy as np
@@ -67,3 +68,129 @@ def shaped_half_extents(rng, kind: str, low: float, high: float) -> np.ndarray:
     elif kind == "cube":
         h[:] = h[0]
     return h
+
+
+#: Both values of each boolean feature flag.
+FLAGS = (False, True)
+
+
+def every_kernel_variant() -> list[tuple[str, object]]:
+    """``(label, kernel)`` for every kernel every factory can return: the collide kernel per
+    precision x motion x broad phase, the bounce kernel also over ``spin`` x ``lossy``, the
+    frame kernel also over ``energy_correction`` x ``events``, and once with births (spin and
+    events on). Making a kernel object compiles nothing (that happens at its first launch),
+    so the whole product is cheap to enumerate. The labels read
+    ``factory/precision/motion/broad phase[/spin/lossy[/correction/events]]`` (``.../births``
+    for the births variant).
+    """
+    from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
+    from warpsim.kernels.data import BROAD_PHASES, MOTIONS, PRECISIONS, Features
+    from warpsim.kernels.frame_kernel import frame_kernel
+
+    out = []
+    for p, m, b in itertools.product(PRECISIONS, MOTIONS, BROAD_PHASES):
+        f = Features(precision=p, motion=m, broad_phase=b)
+        out.append((f"collide/{p}/{m}/{b}", collide_kernel(f)))
+        for spin, lossy in itertools.product(FLAGS, FLAGS):
+            out.append((f"bounce/{p}/{m}/{b}/{spin}/{lossy}",
+                        bounce_kernel(f.but(spin=spin, lossy=lossy))))
+            for corr, events in itertools.product(FLAGS, FLAGS):
+                out.append((f"frame/{p}/{m}/{b}/{spin}/{lossy}/{corr}/{events}",
+                            frame_kernel(f.but(spin=spin, lossy=lossy, energy_correction=corr,
+                                               events=events))))
+        out.append((f"frame/{p}/{m}/{b}/births",
+                    frame_kernel(f.but(spin=True, events=True, births=True))))
+    return out
+
+
+
+def exact_entry(start, motion, center, radius) -> tuple[bool, float]:
+    """The exact first entry of ``start + t motion``, ``t`` in [0, 1], into the ball of
+    ``radius`` about ``center`` (or, given the components across a cylinder's axis, into the
+    cylinder).
+
+    Every input is taken at its exact value (floats at their binary value, or
+    :class:`fractions.Fraction`), so ``|d|^2 t^2 + 2 (w . d) t + |w|^2 - radius^2`` has exact
+    rational coefficients and its discriminant an exact sign; the root is taken to 50 digits
+    (:mod:`decimal`) and rounded once. An independent answer for the stable-root tests,
+    whatever the distance.
+
+    Returns:
+        ``(hit, t)``: a hit needs a start outside, motion in, a discriminant > 0 (a tangent
+        touch is no entry) and a root <= 1; ``t`` is 1 without a hit.
+    """
+    from decimal import Decimal, localcontext
+    from fractions import Fraction
+
+    def exact(x) -> Fraction:
+        return x if isinstance(x, Fraction) else Fraction(float(x))
+
+    w = [exact(x) - exact(c) for x, c in zip(start, center, strict=True)]
+    d = [exact(x) for x in motion]
+    r = exact(radius)
+    qa = sum(x * x for x in d)
+    qb = sum(x * y for x, y in zip(w, d, strict=True))
+    qc = sum(x * x for x in w) - r * r
+    disc = qb * qb - qa * qc
+    if not (qc > 0 and qb < 0 and disc > 0):
+        return False, 1.0
+    with localcontext() as ctx:
+        ctx.prec = 50
+
+        def dec(x: Fraction) -> Decimal:
+            return Decimal(x.numerator) / Decimal(x.denominator)
+
+        t = (dec(-qb) - dec(disc).sqrt()) / dec(qa)
+    return (True, float(t)) if t <= 1 else (False, 1.0)
+
+
+def textbook_entry(start, motion, center, radius, dtype) -> tuple[bool, float]:
+    """:func:`exact_entry` computed in ``dtype`` with the textbook discriminant
+    ``(w . d)^2 - |d|^2 c``, to show that a stable-root case is one where that form fails; a
+    zero discriminant counts as a hit (``>= 0``, as the NumPy sweep had it)."""
+    w = np.asarray(start, dtype) - np.asarray(center, dtype)
+    d, r = np.asarray(motion, dtype), dtype(radius)
+    qa, qb, qc = d @ d, w @ d, w @ w - r * r
+    disc = qb * qb - qa * qc
+    if not (qc > 0 and qb < 0 and disc >= 0):
+        return False, 1.0
+    t = float(qc / (-qb + np.sqrt(disc)))
+    return (True, t) if t <= 1 else (False, 1.0)
+
+
+#: Aims of the far passes, as fractions of the Minkowski radius ``R``: three through the
+#: feature (from 3 % of ``R`` inside its surface), two beside it. Above ``1 / sqrt(2)`` so that
+#: the diagonal pass by an edge enters its cylinder, not the face before it.
+FAR_AIMS = (0.75, 0.9, 0.97, 1.03, 1.2)
+
+
+def far_passes(feature: str, distance: float, big_r: float, dtype) -> list[dict]:
+    """Straight passes by a rounded box's feature from ``distance`` [m] on either side, one per
+    aim of :data:`FAR_AIMS`, in the box's frame, with the coordinates rounded to ``dtype``.
+
+    ``feature`` "ball": a point box (``h = 0``) at the origin, passed along x at ``y = aim R``.
+    ``feature`` "edge": the unit cube's edge along z at ``x = y = 1``, passed at ``z = 0.3``
+    along ``(1, -1, 0) / sqrt(2)`` at ``aim R`` from the edge's axis along ``(1, 1, 0) /
+    sqrt(2)`` (with ``aim > 1 / sqrt(2)`` the path meets no face's rectangle first).
+
+    Returns:
+        One dict per pass: ``name``, ``a`` and ``d`` (3,) in ``dtype``, ``h`` (3,), and
+        ``across`` (the coordinates across the feature) and ``axis_point`` (the feature's centre
+        in them), the arguments :func:`exact_entry` needs.
+    """
+    rows = []
+    for aim in FAR_AIMS:
+        if feature == "ball":
+            a = np.array([-distance, aim * big_r, 0.0])
+            d = np.array([2.0 * distance, 0.0, 0.0])
+            h, across, axis_point = np.zeros(3), [0, 1, 2], (0.0, 0.0, 0.0)
+        else:
+            normal = np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)
+            along = np.array([1.0, -1.0, 0.0]) / np.sqrt(2.0)
+            a = np.array([1.0, 1.0, 0.3]) + aim * big_r * normal - distance * along
+            d = 2.0 * distance * along
+            h, across, axis_point = np.ones(3), [0, 1], (1.0, 1.0)
+        rows.append({"name": f"{feature} from {distance:g} m, aim {aim:g} R",
+                     "a": a.astype(dtype), "d": d.astype(dtype), "h": h,
+                     "across": across, "axis_point": axis_point})
+    return rows

@@ -195,14 +195,23 @@ def _face_candidates(a, d, h, big_r):
     return ts, valid, np.array(axes), np.array(signs)
 
 
-def _entering_root(qa, qb, qc):
+def _entering_root(qa, qb, qc, r2, cross2):
     """Smaller root of ``qa t^2 + 2 qb t + qc`` for a start outside (``qc > 0``) moving in.
+
+    The quadratic is ``|w + t d|^2 - R^2`` (``qa = |d|^2``, ``qb = w . d``, ``qc = |w|^2 - R^2``)
+    in the plane across an edge or in space about a corner. Its discriminant comes from
+    Lagrange's identity ``(w . d)^2 = |w|^2 |d|^2 - |w x d|^2``: ``qb^2 - qa qc =
+    qa R^2 - |w x d|^2`` (``cross2 = |w x d|^2``, ``r2 = R^2``). ``|w x d|`` is ``|d|`` times
+    the line's distance from the feature and carries the rounding of ``w`` and ``d`` only, so
+    the form holds its digits when the segment starts far away, where ``qb^2 - qa qc``
+    subtracts two numbers of size ``|w|^2 |d|^2``. The root is ``qc / (-qb + sqrt(disc))``, a
+    sum of two positive terms.
 
     Returns:
         ``(t, ok)``; ``ok`` requires ``qb < 0`` and a positive discriminant (a double root is a
         tangent touch, not an entry).
     """
-    disc = qb * qb - qa * qc
+    disc = qa * r2 - cross2
     ok = (qc > 0.0) & (qb < 0.0) & (disc > 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(ok, qc / (-qb + np.sqrt(np.where(ok, disc, 0.0))), np.inf)
@@ -243,7 +252,8 @@ def _local_sweep(a, d, h, big_r):
                 qa = d[:, i] ** 2 + d[:, j] ** 2
                 qb = pi * d[:, i] + pj * d[:, j]
                 qc = pi * pi + pj * pj - r2
-                t, ok = _entering_root(qa, qb, qc)
+                cross = pi * d[:, j] - pj * d[:, i]  # w x d, across the edge
+                t, ok = _entering_root(qa, qb, qc, r2, cross * cross)
                 tt = np.where(ok, t, 0.0)
                 axial = a[:, m] + tt * d[:, m]
                 normal = np.zeros((n, 3))
@@ -263,7 +273,8 @@ def _local_sweep(a, d, h, big_r):
                 qa = np.einsum("ij,ij->i", d, d)
                 qb = np.einsum("ij,ij->i", w, d)
                 qc = np.einsum("ij,ij->i", w, w) - r2
-                t, ok = _entering_root(qa, qb, qc)
+                cross = np.cross(w, d)
+                t, ok = _entering_root(qa, qb, qc, r2, np.einsum("ij,ij->i", cross, cross))
                 normal = w + np.where(ok, t, 0.0)[:, None] * d
                 length = np.linalg.norm(normal, axis=1)
                 normal /= np.where(length > 0.0, length, 1.0)[:, None]
@@ -313,9 +324,10 @@ def sweep_reference_batch(a, b, center, half_extents, rotation, box_radius,
     return SweepRefArrays(hit=hit, t=t, contact=contact, normal=normal)
 
 
-def _entering_root_scalar(qa: float, qb: float, qc: float) -> float:
-    """Scalar :func:`_entering_root`: the entering root, or inf when there is none."""
-    disc = qb * qb - qa * qc
+def _entering_root_scalar(qa: float, qb: float, qc: float, r2: float, cross2: float) -> float:
+    """Scalar :func:`_entering_root` (the same stable forms): the entering root, or inf when
+    there is none."""
+    disc = qa * r2 - cross2
     if qc > 0.0 and qb < 0.0 and disc > 0.0:
         return qc / (-qb + math.sqrt(disc))
     return math.inf
@@ -353,7 +365,8 @@ def _local_sweep_scalar(a, d, h, big_r):
             for sj in (1.0, -1.0):
                 pi, pj = a[i] - si * h[i], a[j] - sj * h[j]
                 t = _entering_root_scalar(d[i] * d[i] + d[j] * d[j], pi * d[i] + pj * d[j],
-                                          pi * pi + pj * pj - r2)
+                                          pi * pi + pj * pj - r2, r2,
+                                          (pi * d[j] - pj * d[i]) ** 2)
                 if t <= 1.0 and t < best_t and abs(a[m] + t * d[m]) <= h[m]:
                     ni, nj = pi + t * d[i], pj + t * d[j]
                     length = math.hypot(ni, nj)
@@ -365,9 +378,12 @@ def _local_sweep_scalar(a, d, h, big_r):
         for sy in (1.0, -1.0):
             for sz in (1.0, -1.0):
                 w = (a[0] - sx * h[0], a[1] - sy * h[1], a[2] - sz * h[2])
+                cross = (w[1] * d[2] - w[2] * d[1], w[2] * d[0] - w[0] * d[2],
+                         w[0] * d[1] - w[1] * d[0])
                 t = _entering_root_scalar(sum(x * x for x in d),
                                           sum(x * y for x, y in zip(w, d, strict=True)),
-                                          sum(x * x for x in w) - r2)
+                                          sum(x * x for x in w) - r2, r2,
+                                          sum(x * x for x in cross))
                 if t <= 1.0 and t < best_t:
                     p = [x + t * y for x, y in zip(w, d, strict=True)]
                     length = math.sqrt(sum(x * x for x in p))

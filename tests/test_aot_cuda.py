@@ -18,13 +18,13 @@ import os
 
 import pytest
 import warp as wp
+from helpers import every_kernel_variant
 
 from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
 from warpsim.kernels.data import BROAD_PHASES, MOTIONS, PRECISIONS, Features
 from warpsim.kernels.frame_kernel import frame_kernel
 
 ARCHS = (80, 90)
-FLAGS = (False, True)
 ALL_ON = dict(spin=True, lossy=True, energy_correction=True, events=True, births=True)
 ALL_OFF = dict(spin=False, lossy=False, energy_correction=False, events=False, births=False)
 
@@ -53,29 +53,13 @@ def per_factory():
     return out
 
 
-def every_variant():
-    """(label, kernel) of the whole product of every flag of every factory."""
-    out = []
-    for p, m, b in itertools.product(PRECISIONS, MOTIONS, BROAD_PHASES):
-        f = Features(precision=p, motion=m, broad_phase=b)
-        out.append((f"collide/{p}/{m}/{b}", collide_kernel(f)))
-        for spin, lossy in itertools.product(FLAGS, FLAGS):
-            out.append((f"bounce/{p}/{m}/{b}/{spin}/{lossy}",
-                        bounce_kernel(f.but(spin=spin, lossy=lossy))))
-            for corr, events in itertools.product(FLAGS, FLAGS):
-                out.append((f"frame/{p}/{m}/{b}/{spin}/{lossy}/{corr}/{events}",
-                            frame_kernel(f.but(spin=spin, lossy=lossy, energy_correction=corr,
-                                               events=events))))
-    return out
-
-
 def compiles(kernel, arch, folder) -> None:
     paths = wp.compile_aot_module(kernel.module, arch=arch, module_dir=folder, use_ptx=True)
     assert paths and all(p.suffix == ".ptx" and p.stat().st_size > 0 for p in paths)
     assert all(f"sm{arch}" in p.name for p in paths)
 
 
-CHOICES = {"sample": sample, "factories": per_factory, "all": every_variant}
+CHOICES = {"sample": sample, "factories": per_factory, "all": every_kernel_variant}
 
 
 @pytest.mark.slow

@@ -220,16 +220,23 @@ def test_sphere_slides_down_a_slope(precision):
                                atol=tol * 10)
 
 
+#: Capped frames a lossy ball may take while it settles: hops shorter than a frame's share of
+#: the cap (``dt / MAX_BOUNCES``, from 20 mm/s at 1/60 s) down to the 5 mm/s of a support are
+#: about four bounces at retention 0.5, so a frame or two per settling (a few more on slopes).
+SETTLING_CAPPED_FRAMES = 8
+
+
 @pytest.mark.slow
-def test_lossy_ball_comes_to_rest_without_capping():
-    """Retention 0.5 (and spin): hops shrink, then a support; never the cap, never inside the
-    floor, the energy never rises and ends at rest on the floor."""
+def test_lossy_ball_comes_to_rest():
+    """Retention 0.5 (and spin): hops shrink, then a support (hops below 5 mm/s are not made:
+    no Zeno loop); the cap only in the last short hops, never inside the floor, the energy
+    never rises and ends at rest on the floor."""
     rng = np.random.default_rng(3)
     x, v = room_spheres(rng, 16)
     out = run(closed_room(HALF), x, v, 600, 1.0 / 60.0, "float64", retention=0.5, spin=True,
               friction=0.2, record=True)
     hist = out["history"]
-    assert out["capped"].sum() == 0
+    assert out["capped"].max() <= SETTLING_CAPPED_FRAMES
     assert hist[:, :, 1].min() >= -L - 1e-12
     np.testing.assert_allclose(out["position"][:, 1], -L, atol=1e-12)
     np.testing.assert_allclose(out["velocity"][:, 1], 0.0, atol=1e-12)
@@ -308,7 +315,8 @@ def test_error_does_not_depend_on_dt(precision):
 @pytest.mark.slow
 def test_lossy_ball_settles_in_a_valley():
     """Two slopes meeting in a crease, retention 0.5: the second support makes the sphere slide
-    along the crease (here level), so it comes to rest there; never the cap, never inside."""
+    along the crease (here level), so it comes to rest there; the cap only while it settles,
+    never inside."""
     th = np.radians(25.0)
     down_left = np.array([np.sin(th), np.cos(th), 0.0])
     down_right = np.array([-np.sin(th), np.cos(th), 0.0])
@@ -320,7 +328,7 @@ def test_lossy_ball_settles_in_a_valley():
     x = np.array([[0.7, 1.5, 0.0], [-0.3, 1.0, 0.3], [0.05, 0.8, 0.0]])
     out = run(valley, x, np.zeros((3, 3)), 600, 1 / 60, "float64", radius=0.1, retention=0.5,
               record=True)
-    assert out["capped"].sum() == 0
+    assert out["capped"].max() <= SETTLING_CAPPED_FRAMES
     gap = valley.signed_distance(out["history"].reshape(-1, 3)).min(axis=1) - 0.1
     assert gap.min() >= -1e-12
     crease_y = 0.1 / np.cos(th)  # centre height touching both slopes at x = 0

@@ -119,7 +119,7 @@ def test_in_process_shards_equal_one_simulator(scene, reference, tmp_path):
     out = tmp_path / "run.usda"
     summary = run(scene, out, shards=3, velocities=True)
     assert summary.recomputed == (0, 1, 2) and summary.reused == ()
-    assert summary.workers == 0 and summary.workers_used == 1
+    assert summary.processes == 0 and summary.processes_used == 1
     assert_same_as_reference(wd.read(out), reference, velocities=True)
 
 
@@ -136,12 +136,26 @@ def test_scene_without_obstacles_or_emitter_is_refused(scene, tmp_path):
 @pytest.mark.parametrize("kw, message", [
     ({"shards": 0}, "shards"), ({"block": 0}, "block"), ({"n": -1}, "n must"),
     ({"every": 0}, "every"), ({"start": 30}, "start"), ({"dt": -1.0}, "dt"),
-    ({"max_bounces": 0}, "max_bounces"), ({"workers": 2}, "local"),
+    ({"max_bounces": 0}, "max_bounces"), ({"processes": 2}, "local"),
 ])
 def test_bad_arguments_fail_before_any_work(scene, tmp_path, kw, message):
     with pytest.raises(ValueError, match=message):
         run(scene, tmp_path / "a.usdc", **kw)
     assert not (tmp_path / "a.usdc").exists()
+
+
+@pytest.mark.parametrize("call", [
+    lambda out: run("room", out, n=8, client="local", workers=2),
+    lambda out: wd.sweep(len, ["a"], client="local", workers=2, progress=False),
+], ids=["run", "sweep"])
+def test_workers_is_not_the_dask_process_count(tmp_path, call):
+    """``workers`` counts CPU threads everywhere (Simulator, CLI); the Dask process count is
+    ``processes``, and the old keyword is an error naming the new one, raised before a cluster
+    starts or a file is made."""
+    out = tmp_path / "a.usdc"
+    with pytest.raises(TypeError, match=r"processes=.*threads"):
+        call(out)
+    assert not out.exists() and not (tmp_path / "a.shards").exists()
 
 
 # --- on a LocalCluster of two processes ---------------------------------------------------------
@@ -151,7 +165,7 @@ def test_cluster_stage_equals_one_process_bit_for_bit(scene, reference, client, 
     out = tmp_path / "run.usdc"
     summary = run(scene, out, client=client, shards=4)
     assert summary.shards == 4 and summary.recomputed == (0, 1, 2, 3)
-    assert summary.workers == 2 and 1 <= summary.workers_used <= 2
+    assert summary.processes == 2 and 1 <= summary.processes_used <= 2
     stage = Usd.Stage.Open(str(out))
     shards = [UsdGeom.PointInstancer(p) for p in stage.GetPrimAtPath("/World/Spheres")
               .GetChildren()]
@@ -286,7 +300,7 @@ def test_cli_runs_on_a_scheduler_address(client, tmp_path, capsys):
                  "--dask", client.scheduler_info()["address"], "-o", str(out), "--no-progress"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    assert "2 of 2 shards recomputed" in captured.out and "of 2 workers" in captured.out
+    assert "2 of 2 shards recomputed" in captured.out and "of 2 Dask processes" in captured.out
     assert wd.read(out).position.shape == (7, 32, 3)  # frames 0..6
 
 

@@ -9,6 +9,7 @@ from functools import cache
 import numpy as np
 import pytest
 import warp as wp
+from helpers import exact_entry, far_passes
 
 from warpsim.kernels.capsule import capsule_funcs
 from warpsim.kernels.precision import precision as types_of
@@ -64,7 +65,7 @@ def capsule_kernel(name: str):
 def run_rows(kernel, p, columns: dict, outputs: dict) -> dict:
     """Launch ``kernel`` over table rows; outputs are pre-filled with a sentinel so an unwritten
     one fails the comparison."""
-    n = len(next(iter(columns.values())))
+    n = len(next(iter(columns.values()))[0])  # rows of the first column's values
     inputs = []
     for values, dtype in columns.values():
         inputs.append(wp.array(np.asarray(values, dtype=p.np_dtype if dtype is not wp.int32
@@ -125,6 +126,9 @@ CAPSULE_CASES = {
                              (0, 1, 0)),
     "sphere: root beyond the end": ((-3, 0, 0), (1, 0, 0), (0, 0, 0), (0, 0, 0), 1, 1, 0, 1.0,
                                     (0, 0, 0)),
+    # a root exactly at t = 1 is in range: the segment's end touches (t in [0, 1], closed)
+    "sphere: root at the end": ((-3, 0, 0), (2, 0, 0), (0, 0, 0), (0, 0, 0), 1, 1, 1, 1.0,
+                                (-1, 0, 0)),
     # radius 0: the contact centre is the sphere's centre, so there is no normal (the
     # rounded-box sweep never asks: a Minkowski radius below SHARP_REL is a sharp box)
     "sphere: radius 0 (a point on the path)": ((-3, 0, 0), (4, 0, 0), (0, 0, 0), (0, 0, 0), 0,
@@ -138,6 +142,12 @@ CAPSULE_CASES = {
                                                                0.875, (-1, 0, 0)),
     "capsule: zero length is a sphere": ((-3, 0, 0), (4, 0, 0), (0, 0, 0), (0, 0, 0), 1, 0, 1,
                                          0.5, (-1, 0, 0)),
+    "capsule: side entry at the end": ((0.5, 3, 0), (0, -2, 0), (0, 0, 0), (1, 0, 0), 1, 0, 1,
+                                       1.0, (0, 1, 0)),
+    # a start on the side is a start in contact, a hit at t = 0 whatever the motion (the
+    # caller decides whether it goes in), as on the ball
+    "capsule: start on the side, moving away": ((0.5, 1, 0), (0, 1, 0), (0, 0, 0), (1, 0, 0),
+                                                1, 0, 1, 0.0, (0, 1, 0)),
     "capsule: miss beside the end": ((3, 0, 2), (-6, 0, 0), (-1, 0, 0), (1, 0, 0), 1, 0, 0, 1.0,
                                      (0, 0, 0)),
 }
@@ -155,3 +165,44 @@ def test_segment_sphere_and_capsule(name, precision, tol):
     assert out["hit"][0] == hit
     np.testing.assert_allclose(out["t"][0], t, rtol=0, atol=tol["t_abs"])
     np.testing.assert_allclose(out["normal"][0], normal, rtol=0, atol=tol["unit"] * 10)
+
+
+#: Far passes per precision: (distance [m], radius [m]) where the textbook discriminant has
+#: lost every digit (float32: 5 cm from 300 m; float64: 1 cm from 1000 km).
+FAR = {"float32": (300.0, 0.05), "float64": (1.0e6, 0.01)}
+
+
+@pytest.mark.parametrize("feature", ["ball", "edge"])
+def test_far_passes_agree_with_the_exact_root(feature, precision):
+    """Passes by a ball (``segment_sphere``) and by a capsule's side (``segment_capsule``, the
+    unit cube's z edge) from far away, through it and just beside it: the verdict, ``t`` (to a
+    few ulps) and normal (to the start's rounding over the radius) of the exact rational root
+    of the rounded inputs (``helpers.exact_entry``)."""
+    from fractions import Fraction
+
+    p = types_of(precision)
+    distance, radius = FAR[precision]
+    rows = far_passes(feature, distance, radius, p.np_dtype)
+    ends = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)) if feature == "ball" else \
+        ((1.0, 1.0, -1.0), (1.0, 1.0, 1.0))
+    n = len(rows)
+    out = run_rows(capsule_kernel(precision), p,
+                   {"a": ([r["a"] for r in rows], p.vec3), "d": ([r["d"] for r in rows], p.vec3),
+                    "e0": ([ends[0]] * n, p.vec3), "e1": ([ends[1]] * n, p.vec3),
+                    "radius": ([radius] * n, p.scalar),
+                    "sphere": ([int(feature == "ball")] * n, wp.int32)},
+                   {"hit": wp.int32, "t": p.scalar, "normal": p.vec3})
+    eps = float(np.finfo(p.np_dtype).eps)
+    for k, row in enumerate(rows):
+        across = row["across"]
+        hit, t = exact_entry(row["a"][across], row["d"][across], row["axis_point"], radius)
+        assert out["hit"][k] == hit, row["name"]
+        assert out["t"][k] == pytest.approx(t, abs=8 * eps), row["name"]
+        normal = np.zeros(3)
+        if hit:
+            contact = [Fraction(float(row["a"][i])) - Fraction(c) + Fraction(t)
+                       * Fraction(float(row["d"][i])) for i, c in zip(across, row["axis_point"],
+                                                                    strict=True)]
+            normal[across] = np.array([float(x) for x in contact]) / radius
+        np.testing.assert_allclose(out["normal"][k], normal, rtol=0,
+                                   atol=8 * eps * distance / radius, err_msg=row["name"])

@@ -1,19 +1,17 @@
 """Every kernel every factory can return: no backward code, and arguments found by name.
 
-The factories are enumerated over all their feature flags; a kernel object is cheap to make (no
+The factories are enumerated over all their feature flags (``helpers.every_kernel_variant``,
+the enumeration the ahead-of-time GPU build also uses); a kernel object is cheap to make (no
 compile happens until a launch), so the whole product is checked.
 """
 
-import itertools
-
 import numpy as np
 import pytest
+from helpers import every_kernel_variant
 
 import warpsim as ws
-from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
-from warpsim.kernels.data import MOTIONS, Features
-from warpsim.kernels.frame_kernel import frame_kernel
-from warpsim.kernels.nearest import BROAD_PHASES
+from warpsim.kernels.collide_kernels import collide_kernel
+from warpsim.kernels.data import Features
 from warpsim.kernels.variant import KERNEL_OPTIONS
 from warpsim.model import (
     DeviceState,
@@ -24,29 +22,7 @@ from warpsim.model import (
     parameter_names,
 )
 
-PRECISIONS = ("float32", "float64")
-FLAGS = (False, True)
-
-
-def all_kernels():
-    """(label, kernel) for every variant of every factory."""
-    out = []
-    for prec, motion, bvh in itertools.product(PRECISIONS, MOTIONS, BROAD_PHASES):
-        f = Features(precision=prec, motion=motion, broad_phase=bvh)
-        out.append((f"collide/{prec}/{motion}/{bvh}", collide_kernel(f)))
-        for spin, lossy in itertools.product(FLAGS, FLAGS):
-            out.append((f"bounce/{prec}/{motion}/{spin}/{lossy}/{bvh}",
-                        bounce_kernel(f.but(spin=spin, lossy=lossy))))
-            for corr, events in itertools.product(FLAGS, FLAGS):
-                out.append((f"frame/{prec}/{motion}/{spin}/{corr}/{lossy}/{bvh}/{events}",
-                            frame_kernel(f.but(spin=spin, lossy=lossy, energy_correction=corr,
-                                               events=events))))
-        out.append((f"frame/{prec}/{motion}/births/{bvh}",
-                     frame_kernel(f.but(spin=True, events=True, births=True))))
-    return out
-
-
-KERNELS = all_kernels()
+KERNELS = every_kernel_variant()
 
 
 @pytest.mark.parametrize("label,kernel", KERNELS, ids=[k[0] for k in KERNELS])

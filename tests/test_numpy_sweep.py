@@ -9,6 +9,7 @@ rounding (grazing, starts on the surface, near ties between boxes).
 
 import numpy as np
 import pytest
+from helpers import exact_entry, far_passes, textbook_entry
 from reference import (
     AMBIGUOUS,
     bounce_reference,
@@ -65,6 +66,34 @@ def test_edge_hit_built_by_hand(dtype):
     assert out["hit"][0]
     assert out["t"][0] == pytest.approx(0.25, abs=tol)
     np.testing.assert_allclose(out["normal"][0], (0.6, 0.8, 0.0), atol=TOL[dtype]["normal"])
+
+
+#: Far passes: (dtype, distance [m], Minkowski radius R [m]) where the textbook discriminant
+#: has lost every digit of ``R^2 - |p|^2`` (its error, ``eps |w|^2 |d|^2``, is above
+#: ``|d|^2 R^2``): float32 from 300 m past 5 cm, float64 from 1000 km past 1 cm.
+FAR = [(np.float32, 300.0, 0.05), (np.float64, 1.0e6, 0.01)]
+
+
+@pytest.mark.parametrize("feature", ["ball", "edge"])
+@pytest.mark.parametrize("dtype, distance, big_r", FAR, ids=["float32", "float64"])
+def test_far_passes_agree_with_the_exact_root(feature, dtype, distance, big_r):
+    """Passes by a ball (a point box) and by a rounded edge from far away, through the
+    feature and just beside it: the verdict and ``t`` of the exact rational root of the
+    rounded inputs (to a few ulps), on every row, where the textbook ``b^2 - a c`` form gets
+    each row wrong (a miss counted as a tangent hit, or a ``t`` off by many ulps)."""
+    rows = far_passes(feature, distance, big_r, dtype)
+    box = one_box((0.0, 0.0, 0.0), rows[0]["h"], (0, 0, 0, 1), big_r)
+    out = sweep_boxes_numpy(np.array([r["a"] for r in rows]), np.array([r["d"] for r in rows]),
+                            0.0, box, 1.0, dtype=dtype)
+    t_tol = 8 * float(np.finfo(dtype).eps)
+    for k, row in enumerate(rows):
+        across = row["across"]
+        args = (row["a"][across], row["d"][across], row["axis_point"], big_r)
+        hit, t = exact_entry(*args)
+        assert out["hit"][k] == hit, row["name"]
+        assert out["t"][k] == pytest.approx(t, abs=t_tol), row["name"]
+        textbook_hit, textbook_t = textbook_entry(*args, dtype)
+        assert textbook_hit != hit or abs(textbook_t - t) > 10 * t_tol, row["name"]
 
 
 @pytest.mark.parametrize("dtype", DTYPES, ids=["float64", "float32"])

@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 import pytest
+from helpers import exact_entry, far_passes, textbook_entry
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from reference import (
@@ -111,6 +112,8 @@ CASES = [
      (True, 0.5, (0.0, 1.0, 0.0))),
     ("plate-up", ((0.5, -1.0, 0.25), (0.5, 1.0, 0.25), ORIGIN, (1.0, 0.0, 1.0), I, 0.0, 0.0),
      (True, 0.5, (0.0, -1.0, 0.0))),
+    ("plate-x-from-below", ((-1.0, 0.25, 0.5), (1.0, 0.25, 0.5), ORIGIN, (0.0, 1.0, 1.0), I,
+                            0.0, 0.0), (True, 0.5, (-1.0, 0.0, 0.0))),
     ("plate-rim", ((3.0, 0.0, 0.5), (-1.0, 0.0, 0.5), ORIGIN, (1.0, 0.0, 1.0), I, 0.0, 0.0),
      (True, 0.5, (1.0, 0.0, 0.0))),
     ("plate-miss-beside", ((1.5, 1.0, 0.0), (1.5, -1.0, 0.0), ORIGIN, (1.0, 0.0, 1.0), I,
@@ -169,6 +172,37 @@ def test_rotated_box_face():
     assert got.t == pytest.approx(0.5, abs=1e-14)
     np.testing.assert_allclose(got.normal, u, atol=1e-14)
     np.testing.assert_allclose(got.contact, center + u, atol=1e-13)
+
+
+@pytest.mark.parametrize("feature", ["ball", "edge"])
+@pytest.mark.parametrize("distance, big_r", [(1.0e6, 0.01), (1.0e7, 0.1)])
+def test_far_passes_agree_with_the_exact_root(feature, distance, big_r):
+    """Passes by a corner ball (a point box) and by an edge cylinder from 1000 and 10 000 km,
+    through the feature (from 3 % of ``R`` inside) and just beside it, the box at the origin
+    and at 1e4: both forms of the reference give the verdict and ``t`` of the exact rational
+    root to a few ulps, where the textbook ``b^2 - a c`` discriminant, whose error ``eps |w|^2
+    |d|^2`` is above ``|d|^2 R^2`` here, gets each row wrong."""
+    from fractions import Fraction
+
+    t_tol = 16 * float(np.finfo(np.float64).eps)
+    for shift in (0.0, 1.0e4):
+        for row in far_passes(feature, distance, big_r, np.float64):
+            center = np.full(3, shift)
+            a = row["a"] + center
+            b = a + row["d"]
+            across = row["across"]
+            motion = [Fraction(float(b[i])) - Fraction(float(a[i])) for i in across]
+            start = [Fraction(float(a[i])) - Fraction(shift) for i in across]
+            hit, t = exact_entry(start, motion, row["axis_point"], big_r)
+            for got in (sweep_reference(a, b, center, row["h"], I, big_r, 0.0),
+                        sweep_reference(a, b, center, row["h"], I, 0.5 * big_r, 0.5 * big_r)):
+                assert got.hit == hit, row["name"]
+                assert got.t == pytest.approx(t, abs=t_tol), row["name"]
+            batch = sweep_reference_batch(a, b, center, row["h"], I, big_r, 0.0)
+            assert batch.hit[0] == hit and batch.t[0] == pytest.approx(t, abs=t_tol)
+            textbook_hit, textbook_t = textbook_entry(row["a"][across], row["d"][across],
+                                                      row["axis_point"], big_r, np.float64)
+            assert textbook_hit != hit or abs(textbook_t - t) > 10 * t_tol, row["name"]
 
 
 #: Cases decided on an exact tie or an exact tangency: once rotated, rounding of the local

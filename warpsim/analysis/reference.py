@@ -24,19 +24,49 @@ energy at the contact times ``k``). Several simultaneous contacts (a corner betw
 reflect one after the other, the most head-on first.
 
 Support (resting and sliding) contacts: a sphere touching a box with a normal speed, into or out
-of it, of at most ``RESTING_SPEED`` (5 mm/s, a hop of at most 1.3 micrometres) while gravity
-presses it onto that surface does not bounce: the normal part of its velocity is removed (energy
-lost: at most ``1/2 m RESTING_SPEED^2``) and it slides, frictionless, with the tangential part
-of gravity, ``g - (g . n) n``, along the surface's tangent plane (with two supports, along their
-crease, both kept until the slide ends; with three it rests). On a face that is exact: it
-slides along the face plane until its contact point leaves the face's rectangle, or it meets
-another box. On an edge or a corner (a curved surface) it slides along the tangent plane only
-until that plane is ``CURVED_SLIDE_DRIFT`` (0.1 um) above the surface, then falls back onto it:
-a sphere slipping off a rounded edge follows the surface within a few times that. A lossy ball
-comes to rest after a finite number of bounces (never a Zeno loop of ever smaller hops), and a
-ball put on a floor stays there. A sphere that exceeds ``MAX_EVENTS`` contacts is given up
-(its remaining samples are NaN and ``incomplete`` says so): in the scenes here that never
-happens.
+of it, of at most ``RESTING_SPEED`` (5 mm/s, a hop of at most 1.3 micrometres) while the box can
+hold it does not bounce: the normal part of its velocity is removed (energy lost: at most
+``1/2 m RESTING_SPEED^2``) and it slides, frictionless (translation has no friction in the
+model), held by the acceleration ``lambda n`` along the outward normal, ``lambda = -|v_perp|^2 / R
+- g . n`` (``v_perp`` the velocity without its component along an edge's axis; all of it on a
+corner; ``lambda = -g . n`` on a face). The box holds the sphere while gravity presses it onto the
+surface and ``lambda >= 0``. Every support's end is an event, found to float64 resolution:
+
+- on a face the centre follows the face-frame parabola (gravity less its normal part) until the
+  contact point leaves the face's rectangle (a root of that parabola);
+- on a rounded edge (the cylinder of radius ``R`` about a core edge; ``R = r`` on a sharp edge)
+  the centre's offset from the edge line is integrated by a Taylor series of order
+  ``ARC_TAYLOR_ORDER`` whose steps keep the truncation below ``ARC_STEP_REL_TOL R``, the offset
+  put back on the circle and the energy restored at each step (energy holds to rounding); along
+  the axis the motion is the free parabola. On a rounded corner (the sphere of radius ``R`` about
+  a core corner) the same series integrates all three offsets (see ``_Arc``);
+- a curved slide ends where ``lambda`` reaches 0 (detachment: free flight from there), where the
+  contact point leaves the edge's or corner's region (between the adjacent faces' normals;
+  onto a face: the face slide, or onto an edge from a corner, or a corner from an edge's end,
+  or free flight where the new region cannot hold it), or when the centre meets another box
+  (found by the same advancement, with the support's push bounded by ``|g|``). Each end is a
+  crossing of the integrated solution (a Taylor polynomial) bisected to float64 resolution,
+  and samples inside a slide are the series at those times.
+- a sphere reaching an edge with ``|v_perp|^2 / R > -g . n`` (e.g. at 1 m/s over a sharp edge
+  with ``r = 0.1``) leaves at once into free flight. Leaving a curve tangentially, the free
+  path stays off that curve's surface for a time known in closed form (the parabola of the
+  offset against ``R``); the box is not advanced against until then, as the separating planes
+  would only creep along the tangent. A slow contact (at most ``RESTING_SPEED``) on a curve
+  that cannot hold the sphere is a support that ends at once: its normal speed is removed and
+  the sphere leaves tangentially.
+
+Against analytic slides (``tests/test_reference_supports.py``: closed forms and quadrature of the
+energy integral) the reference agrees to 1e-15 m near the origin (1e-13 m on turned and tilted
+boxes, 1e-12 m from a release 0.1 degree off the top, where the unstable start amplifies
+rounding) and 4e-11 m at 1 km: far within the 1e-9 m it claims.
+
+With several supports at once (along their crease, or a rest on three) the sphere slides along the
+supports' common tangent space; where a curve is among them it does so until that plane is
+``CURVED_SLIDE_DRIFT`` (0.1 um) above the surface, then falls back onto it, and so does a point-
+sized sphere (``R`` below ``POINT_SKIN_ULPS``) on an edge. A lossy ball comes to rest after a
+finite number of bounces (never a Zeno loop of ever smaller hops), and a ball put on a floor stays
+there. A sphere that exceeds ``MAX_EVENTS`` contacts (or another guard, ``MAX_*``) is given up (its
+remaining samples are NaN and ``incomplete`` says so): in the scenes here that never happens.
 
 What is not modelled: spin. The model's friction changes only the angular momentum (translation
 is not changed by friction: it only turns the spin), and its spin update is defined per frame, so
@@ -50,6 +80,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.polynomial import polynomial as P
 
 from .. import validation as check
 from ..events import ContactEvents
@@ -77,18 +108,31 @@ RESTING_SPEED = 5e-3
 #: a wall exactly parallel to gravity (``g . n`` zero but for rounding) supports nothing.
 GRAVITY_PRESS_REL = 1e-9
 
-#: On an edge or corner support the sphere slides along the tangent plane until the plane is at
-#: most this far [m] above the curved surface, then falls back to it (0.1 um: below any error
-#: the study measures, and the fall lands at 1.4 mm/s, below ``RESTING_SPEED``).
+#: Where two or more supports act together and one of them is an edge or a corner (a sphere
+#: wedged between a rounded edge and another box), the sphere slides along the supports' common
+#: tangent space until it is at most this far [m] above the curved surface, then falls back to
+#: it (0.1 um; the fall lands at 1.4 mm/s, below ``RESTING_SPEED``). A single curved support is
+#: followed exactly (see ``_Arc``).
 CURVED_SLIDE_DRIFT = 1e-7
 
-#: The smallest curvature radius [m] assumed for that slide: a point on a sharp edge (R = 0)
-#: still makes progress along its tangent plane.
+#: The smallest curvature radius [m] assumed for that crease slide: a point on a sharp edge
+#: (R = 0) still makes progress along its tangent plane.
 CURVED_SLIDE_MIN_RADIUS = 1e-3
 
-#: A face support lasts only when the contact point stays on the face for at least this long
-#: [s]; a sphere at the face's border moving out slides over the edge as on a curved surface.
-FACE_SLIDE_MIN_TIME = 1e-9
+#: Order of the Taylor series that integrates a slide on a rounded edge or corner: high enough
+#: that a step covers a good part of the slide (a few hundredths of a second at R ~ 0.1 m).
+ARC_TAYLOR_ORDER = 30
+
+#: Truncation error allowed per Taylor step, relative to R: far below the float64 rounding of
+#: the position, so the slide is exact to rounding.
+ARC_STEP_REL_TOL = 1e-18
+
+#: Sample points per Taylor step at which an event function (normal force, region border) is
+#: tested for a sign change before the crossing is bisected to float64 resolution.
+ARC_EVENT_SAMPLES = 48
+
+#: Taylor steps of one slide before the sphere is given up (a guard: a slide takes tens).
+MAX_ARC_STEPS = 100_000
 
 #: Contacts (bounces and supports) per sphere before it is given up: a guard, never reached in
 #: the bundled scenes (a 5 s room run takes a few dozen).
@@ -262,8 +306,188 @@ class _World:
         return np.einsum("kji,j->ki", self.rotation, v)
 
 
+def _first_crossing(coeffs: np.ndarray, h: float, rising: bool) -> float:
+    """First ``tau`` in ``(0, h]`` where the polynomial ``sum coeffs[k] tau^k`` goes above 0
+    (``rising``) or to 0 and below (not ``rising``), bisected to float64 resolution; ``inf``
+    when the samples show none (a touch between two samples is not a crossing)."""
+    taus = np.linspace(0.0, h, ARC_EVENT_SAMPLES + 1)
+    f = P.polyval(taus, coeffs)
+    past = f > 0.0 if rising else f <= 0.0
+    if past[0]:
+        if rising or P.polyval(0.0, P.polyder(coeffs)) <= 0.0:
+            return 0.0
+        # an offset that starts on its border moving out: the crossing is its next one
+        inside = np.flatnonzero(~past)
+        if not len(inside):
+            return np.inf
+        past[:inside[0]] = False
+    hits = np.flatnonzero(past)
+    if not len(hits):
+        return np.inf
+    lo, hi = taus[hits[0] - 1], taus[hits[0]]
+    while True:
+        mid = 0.5 * (lo + hi)
+        if not lo < mid < hi:
+            return hi
+        value = P.polyval(mid, coeffs)
+        if (value > 0.0) if rising else (value <= 0.0):
+            hi = mid
+        else:
+            lo = mid
+
+
+class _Feature:
+    """Where on box ``j`` a sphere centre is, seen from the box's frame: the core edge or
+    corner it is nearest to (``out``: the local axes along which it is beyond the core box,
+    with their ``sign``), its offset ``w`` [m] from that edge line or corner point along those
+    axes (signed outward), and the rates of ``w``. A centre within ``tol`` [m] of a region's
+    border counts on the side it moves to (its velocity, then gravity, decide)."""
+
+    def __init__(self, world: _World, j: int, x, u, tol: float):
+        rot = world.rotation[j]
+        self.rot, self.center, self.half = rot, world.center[j], world.half[j]
+        self.y, self.vy, self.gy = rot.T @ (x - self.center), rot.T @ u, rot.T @ world.gravity
+        lead = np.where(self.y != 0.0, self.y, np.where(self.vy != 0.0, self.vy, self.gy))
+        self.sign = np.where(lead >= 0.0, 1.0, -1.0)
+        o = np.abs(self.y) - self.half
+        moving_out = np.where(self.vy != 0.0, self.sign * self.vy, self.sign * self.gy) > 0.0
+        self.out = np.flatnonzero((o > tol) | ((np.abs(o) <= tol) & moving_out))
+        self.w = self.sign[self.out] * self.y[self.out] - self.half[self.out]
+        self.dw = self.sign[self.out] * self.vy[self.out]
+        self.g = self.sign[self.out] * self.gy[self.out]
+
+    @property
+    def curved(self) -> bool:
+        return len(self.out) >= 2
+
+    def normal_force(self, radius: float) -> float:
+        """``lambda = -|v_perp|^2 / R - g . n`` [m/s^2] of the curved support there."""
+        n = self.w / max(float(np.linalg.norm(self.w)), np.finfo(float).tiny)
+        dw = self.dw - (self.dw @ n) * n
+        if radius <= 0.0:
+            return -np.inf if dw @ dw > 0.0 else -float(self.g @ n)
+        return -float(dw @ dw) / radius - float(self.g @ n)
+
+    def clearance(self, radius: float) -> float:
+        """How long [s] free flight from here stays off this feature's surface: until the
+        free parabola of ``w`` (a lower bound of the distance to the core box while every
+        offset stays positive) comes back to ``|w| = R``, or an offset reaches zero (the path
+        enters another region, where the box's planes take over). The start is on the surface
+        with a tangent velocity and a normal force <= 0, so ``|w(s)|^2 - R^2 = s^2 (c2 + c3 s +
+        c4 s^2)`` with ``c2 >= 0``."""
+        w, dw, g = self.w, self.dw, self.g
+        n = w / max(float(np.linalg.norm(w)), np.finfo(float).tiny)
+        dw = dw - (dw @ n) * n
+        c2 = max(float(dw @ dw + (radius * n) @ g), 0.0)
+        back = float(descending_root(c2, float(dw @ g), 0.5 * float(g @ g)))
+        exits = descending_root(w, dw, g)
+        return min(back, float(exits.min()))
+
+
+class _Arc:
+    """A frictionless slide on the cylinder of a core edge or the sphere of a core corner.
+
+    The offset ``w`` [m] of the centre from the edge line (2 components, the edge's axes) or
+    corner point (3 components), in the box frame and signed outward, obeys
+    ``w'' = g_w - mu w`` with ``mu = (|w'|^2 + w . g_w) / R^2``: the support's acceleration
+    ``lambda n`` with ``lambda = -R mu`` keeps ``|w| = R`` (it is the motion on the surface,
+    ``lambda = -|v_perp|^2 / R - g . n``). That system is polynomial, so its Taylor series is
+    built term by term (order ``ARC_TAYLOR_ORDER``) and each step is as long as the series
+    stays below ``ARC_STEP_REL_TOL`` R; at each step's start ``w`` is put back on the surface,
+    ``w'`` made tangent and its size set from the energy ``1/2 |w'|^2 - g_w . w`` of the start:
+    the energy holds to float64 rounding. Along an edge's axis the motion is the free parabola.
+    The slide ends at the first of: the normal force reaching 0 (``mu`` rising through 0:
+    detachment), an offset reaching 0 (the contact point enters a face's region, or an edge's
+    from a corner), the contact point passing an end of the edge (a corner's region), or the
+    horizon. Each is a crossing of a Taylor polynomial (or the axial parabola) bisected to
+    float64 resolution. ``state(tau)`` is the motion ``tau`` [s] after the start, from the
+    series (dense output).
+    """
+
+    def __init__(self, feature: _Feature, radius: float, horizon: float):
+        f = feature
+        self.f, self.radius = f, radius
+        self.axial = [a for a in range(3) if a not in f.out]
+        r2 = radius * radius
+        n = f.w / np.linalg.norm(f.w)
+        dw = f.dw - (f.dw @ n) * n
+        energy = 0.5 * float(dw @ dw) - float(f.g @ f.w)
+        w = radius * n
+        self.starts, self.series = [], []
+        tau, self.end, self.reason = 0.0, horizon, "horizon"
+        order = ARC_TAYLOR_ORDER
+        for a in self.axial:  # the contact point passing an end of the edge: a corner
+            h, y, v, g = f.half[a], f.y[a], f.vy[a], f.gy[a]
+            t_axis = min(_exit_time(h - y, -v, -g), _exit_time(h + y, v, g))
+            if t_axis < self.end:
+                self.end, self.reason = t_axis, "exit"
+        while tau < self.end:
+            if len(self.starts) > MAX_ARC_STEPS:
+                raise _GiveUp
+            coeffs, mu = self._taylor(w, dw, f.g, r2, order)
+            size = np.abs(coeffs[order - 1:]).max(axis=1)
+            powers = 1.0 / np.arange(order - 1, order + 1)
+            with np.errstate(divide="ignore"):
+                reach = (ARC_STEP_REL_TOL * radius / size) ** powers
+            h = min(float(reach.min()), self.end - tau)
+            self.starts.append(tau)
+            self.series.append(coeffs)
+            end = _first_crossing(mu, h, rising=True)
+            reason = "detach"
+            for b in range(len(w)):
+                t_b = _first_crossing(coeffs[:, b], h, rising=False)
+                if t_b < end:
+                    end, reason = t_b, "exit"
+            if end <= h and tau + end < self.end:
+                self.end, self.reason = tau + end, reason
+                break
+            tau += h
+            w, dw = P.polyval(h, coeffs), P.polyval(h, P.polyder(coeffs))
+            size = np.linalg.norm(w)
+            w = radius * w / size
+            dw = dw - (dw @ w) * w / r2
+            speed2 = 2.0 * (energy + float(f.g @ w))
+            norm = float(np.linalg.norm(dw))
+            if norm > 0.0:
+                dw = dw * (np.sqrt(max(speed2, 0.0)) / norm)
+        self.starts = np.array(self.starts)
+
+    @staticmethod
+    def _taylor(w, dw, g, r2: float, order: int):
+        """Taylor coefficients of ``w`` (order + 1, d) and of ``mu`` (order - 1,)."""
+        coeffs = np.zeros((order + 1, len(w)))
+        mu = np.zeros(order - 1)
+        coeffs[0], coeffs[1] = w, dw
+        for k in range(order - 1):
+            rate = coeffs[1:k + 2] * np.arange(1, k + 2)[:, None]
+            mu[k] = (np.sum(rate * rate[::-1]) + coeffs[k] @ g) / r2
+            pull = mu[:k + 1] @ coeffs[k::-1]
+            coeffs[k + 2] = ((g if k == 0 else 0.0) - pull) / ((k + 1) * (k + 2))
+        return coeffs, mu
+
+    def state(self, tau: float):
+        """World position [m] and velocity [m/s] ``tau`` [s] after the start."""
+        f = self.f
+        i = max(int(np.searchsorted(self.starts, tau, side="right")) - 1, 0)
+        coeffs = self.series[i]
+        s = tau - self.starts[i]
+        w, dw = P.polyval(s, coeffs), P.polyval(s, P.polyder(coeffs))
+        y, vy = np.empty(3), np.empty(3)
+        y[f.out] = f.sign[f.out] * (f.half[f.out] + w)
+        vy[f.out] = f.sign[f.out] * dw
+        for a in self.axial:
+            y[a] = f.y[a] + f.vy[a] * tau + 0.5 * f.gy[a] * tau * tau
+            vy[a] = f.vy[a] + f.gy[a] * tau
+        return f.center + f.rot @ y, f.rot @ vy
+
+
+class _GiveUp(Exception):
+    """A guard (``MAX_ARC_STEPS``) was reached: the sphere is given up."""
+
+
 class _Flight:
-    """One sphere's event loop (state: time, position, velocity, supports)."""
+    """One sphere's event loop (state: time, position, velocity, supports, the slide on a
+    curved support ``arc`` and the box it has just left ``skip``)."""
 
     def __init__(self, world: _World, x0, u0, radius: float, index: int):
         self.w = world
@@ -280,6 +504,10 @@ class _Flight:
         self.supports: list[int] = []
         self.support_end = np.inf  # time [s] since the segment start when the slide ends
         self.acc = world.gravity.copy()
+        self.arc: _Arc | None = None  # the slide on a single curved support
+        self.arc_t0 = 0.0  # its start time [s]
+        self.skip: tuple[int, float] | None = None  # (box, until [s]): just left its curve
+        self.t_end = np.inf
         self.incomplete = False
         self.steps = 0
         self._ev: list[tuple] = []
@@ -324,11 +552,17 @@ class _Flight:
         pos = np.full((len(times), 3), np.nan)
         vel = np.full((len(times), 3), np.nan)
         self._pos, self._vel, self._times, self._next = pos, vel, times, 0
-        g = self.w.gravity
+        self.t_end = t_end
         stalled = 0
         while True:
+            if self.skip is not None and self.t >= self.skip[1]:
+                self.skip = None
             gap, normal, face = self._geometry(self.x)
-            if not self._resolve_contacts(gap, normal, face):
+            try:
+                resolved = self._resolve_contacts(gap, normal, face)
+            except _GiveUp:
+                resolved, self.incomplete = False, True
+            if not resolved:
                 break
             s = self._next_step(gap, normal)
             if self.t + s >= t_end:
@@ -343,9 +577,11 @@ class _Flight:
             self.support_end -= s
             self.steps += 1
             if ended_slide:
-                self.supports = []
-                self.acc = g.copy()
-                self.support_end = np.inf
+                try:
+                    self._end_slide()
+                except _GiveUp:
+                    self.incomplete = True
+                    break
             stalled = stalled + 1 if s <= 0.0 else 0
             if self.steps > MAX_STEPS or stalled > MAX_STALLED_STEPS:
                 self.incomplete = True
@@ -353,6 +589,9 @@ class _Flight:
         return pos, vel
 
     def _at(self, s: float):
+        """Position and velocity ``s`` [s] after the current time."""
+        if self.arc is not None:
+            return self.arc.state(self.t - self.arc_t0 + s)
         return self.x + self.u * s + 0.5 * self.acc * (s * s), self.u + self.acc * s
 
     def _sample_until(self, t_stop: float, inclusive: bool) -> None:
@@ -374,6 +613,35 @@ class _Flight:
     def _presses(self, normal: np.ndarray) -> bool:
         return float(self.w.gravity @ normal) < -GRAVITY_PRESS_REL * self.w.g_norm
 
+    def _in_contact(self, gap) -> np.ndarray:
+        """Boxes within the contact zone, without the supports and the curve just left."""
+        contact = gap <= self.tol
+        if self.supports:
+            contact[self.supports] = False
+        if self.skip is not None:
+            contact[self.skip[0]] = False
+        return contact
+
+    def _holds(self, j: int, normal: np.ndarray) -> bool | None:
+        """Whether box ``j`` can support the sphere where it is: gravity presses, and on an
+        edge or a corner the normal force ``lambda`` is >= 0 too. None: a curve that cannot
+        hold it (it leaves the surface at once)."""
+        if not self._presses(normal):
+            return False
+        if self.target[j] > 0.0:  # point-sized R: the crease rule of _start_slide
+            return True
+        feature = _Feature(self.w, j, self.x, self.u, float(self.tol[j]))
+        if feature.curved and feature.normal_force(float(self.reach[j])) < 0.0:
+            return None
+        return True
+
+    def _leave(self, j: int, normal: np.ndarray) -> None:
+        """Leave the curve of box ``j`` tangentially: free flight, box ``j`` ignored while the
+        free path provably stays off its surface (``_Feature.clearance``)."""
+        self.u = self.u - (self.u @ normal) * normal
+        feature = _Feature(self.w, j, self.x, self.u, float(self.tol[j]))
+        self.skip = (j, self.t + feature.clearance(float(self.reach[j])))
+
     def _resolve_contacts(self, gap, normal, face) -> bool:
         """Reflect off, or rest on, every box in contact that the sphere moves into.
 
@@ -381,9 +649,7 @@ class _Flight:
         """
         if self.w.count == 0:
             return True
-        contact = gap <= self.tol
-        if self.supports:
-            contact[self.supports] = False
+        contact = self._in_contact(gap)
         if not contact.any():
             return True
         changed_supports = False
@@ -394,12 +660,18 @@ class _Flight:
                 break
             j = int(np.flatnonzero(approaching)[np.argmin(un[approaching])])
             speed = -float(un[j])
-            if speed <= RESTING_SPEED and self._presses(normal[j]):
-                self.supports.append(j)
+            holds = self._holds(j, normal[j]) if speed <= RESTING_SPEED else False
+            if holds or holds is None:
+                # a slow contact: the sphere rests or slides on the box, or, on a curve that
+                # cannot hold it, loses its normal speed and leaves tangentially
                 contact[j] = False
-                changed_supports = True
                 if not self._event(j, normal[j], speed, ContactKind.SUPPORT):
                     return False
+                if holds:
+                    self.supports.append(j)
+                    changed_supports = True
+                else:
+                    self._leave(j, normal[j])
             else:
                 self.u = self.u - 2.0 * un[j] * normal[j]
                 if self.w.lossy:
@@ -409,28 +681,39 @@ class _Flight:
                 if self.supports:  # a bounce ends a slide; supports are found again below
                     self.supports = []
                     changed_supports = True
-                    contact = gap <= self.tol
+                    contact = self._in_contact(gap)
         else:
             self.incomplete = True
             return False
         # slow departures and spheres already on a surface (a ball put on a floor) are supports
         un = normal @ self.u
         for j in np.flatnonzero(contact & (np.abs(un) <= RESTING_SPEED)):
-            if j not in self.supports and self._presses(normal[j]):
+            if j in self.supports:
+                continue
+            holds = self._holds(int(j), normal[j])
+            if holds:
                 self.supports.append(int(j))
                 changed_supports = True
                 if not self._event(int(j), normal[j], -float(un[j]), ContactKind.SUPPORT):
                     return False
+            elif holds is None:
+                self._leave(int(j), normal[j])
         if changed_supports:
             self._start_slide(gap, normal, face)
         return True
 
     def _start_slide(self, gap, normal, face) -> None:
-        """Project velocity and gravity onto the supports' tangent space; when the slide ends."""
+        """Start the slide on the supports: on one box (not point-sized) exactly, in its face,
+        edge or corner (``_follow``); on several, along their common tangent space, until a
+        face exit or, with a curve among them, ``CURVED_SLIDE_DRIFT``."""
         g = self.w.gravity
+        self.arc = None
+        self.acc = g.copy()
+        self.support_end = np.inf
         if not self.supports:
-            self.acc = g.copy()
-            self.support_end = np.inf
+            return
+        if len(self.supports) == 1 and self.target[self.supports[0]] == 0.0:
+            self._follow(self.supports[0])
             return
         basis = []
         for j in self.supports:  # Gram-Schmidt over the support normals
@@ -448,7 +731,7 @@ class _Flight:
         end = np.inf
         for j in self.supports:
             t_face = self._face_exit(j, normal[j]) if face[j] else 0.0
-            if t_face > FACE_SLIDE_MIN_TIME:
+            if t_face > 0.0:
                 end = min(end, t_face)
             else:  # curved support: slide along the tangent plane while it stays within drift
                 radius = max(float(self.reach[j]), CURVED_SLIDE_MIN_RADIUS)
@@ -456,6 +739,55 @@ class _Flight:
                 end = min(end, float(descending_root(reach, -np.linalg.norm(u),
                                                      -np.linalg.norm(acc))))
         self.support_end = end
+
+    def _follow(self, j: int) -> None:
+        """Slide on box ``j`` alone from here, in the region the centre is in (moves to): on a
+        face along the face-frame parabola until the contact point leaves the face, on an edge
+        or a corner along the exact curved slide (``_Arc``); or, where the box no longer holds
+        the sphere (gravity does not press a face, the normal force of a curve is < 0), free
+        flight."""
+        g = self.w.gravity
+        radius = float(self.reach[j])
+        f = _Feature(self.w, j, self.x, self.u, float(self.tol[j]))
+        if not f.curved:
+            axis = int(f.out[0])
+            normal = f.rot[:, axis] * f.sign[axis]
+            if not self._presses(normal):
+                self.supports = []
+                return
+            self.u = self.u - (self.u @ normal) * normal
+            self.acc = g - (g @ normal) * normal
+            self.support_end = self._face_exit(j, normal)
+            return
+        normal = f.rot[:, f.out] @ (f.sign[f.out] * f.w)
+        normal = normal / np.linalg.norm(normal)
+        if f.normal_force(radius) < 0.0:
+            self.supports = []
+            self._leave(j, normal)
+            return
+        self.arc = _Arc(f, radius, self.t_end - self.t)
+        self.arc_t0 = self.t
+        self.x, self.u = self.arc.state(0.0)
+        self.support_end = self.arc.end
+
+    def _end_slide(self) -> None:
+        """The slide's end: a detachment (free flight, leaving the curve), the contact point
+        entering another region of the same box (the slide goes on there), or the crease
+        rule's end (supports found again)."""
+        arc, self.arc = self.arc, None
+        self.acc = self.w.gravity.copy()
+        self.support_end = np.inf
+        single = len(self.supports) == 1 and self.target[self.supports[0]] == 0.0
+        if not single or (arc is not None and arc.reason == "horizon"):
+            self.supports = []
+            return
+        j = self.supports[0]
+        if arc is not None and arc.reason == "detach":
+            self.supports = []
+            _, normal, _ = self._geometry(self.x)
+            self._leave(j, normal[j])
+            return
+        self._follow(j)
 
     def _face_exit(self, j: int, normal: np.ndarray) -> float:
         """Time [s] until the contact point sliding on face ``j`` leaves its rectangle."""
@@ -478,9 +810,16 @@ class _Flight:
         """Time [s] to the next point where a separating plane reaches its target gap."""
         step = self.support_end
         if self.w.count:
-            roots = descending_root(gap - self.target, normal @ self.u, normal @ self.acc)
+            if self.arc is None:
+                acc = normal @ self.acc
+            else:  # the support pushes along its normal with 0 <= lambda <= |g|
+                acc = normal @ self.acc - self.w.g_norm
+            roots = descending_root(gap - self.target, normal @ self.u, acc)
             if self.supports:
                 roots[self.supports] = np.inf
+            if self.skip is not None:
+                roots[self.skip[0]] = np.inf
+                step = min(step, self.skip[1] - self.t)
             step = min(step, float(roots.min()))
         return step
 

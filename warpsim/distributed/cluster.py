@@ -13,6 +13,11 @@ CONNECT_TIMEOUT = 10.0
 
 DEFAULT_SCHEDULER_PORT = 8786  # Dask's own default, for an address given without a port
 LOCAL = "local"  # the client value (and ``--dask`` without an address) that starts a LocalCluster
+WORKERS_RENAMED = ("{what}(workers=) was the number of Dask processes of a 'local' cluster: "
+                   "it is now processes= ('workers' means CPU threads everywhere in warpsim; a "
+                   "shard's threads are threads=)")
+"""The error for the keyword ``workers`` of :func:`~warpsim.distributed.run` and
+:func:`~warpsim.distributed.sweep`, which counted processes before it was renamed."""
 DASK_MISSING = 'dask is needed for distributed runs: pip install "warpsim[dask]"'
 
 
@@ -65,17 +70,18 @@ def scheduler_address(text: str) -> str:
 
 
 @contextlib.contextmanager
-def client_for(client, workers: int | None, timeout: float):
+def client_for(client, processes: int | None, timeout: float):
     """Yield a connected ``distributed.Client`` for ``client`` (LOCAL, an address or a Client);
-    what this opened is closed on exit."""
+    what this opened is closed on exit. ``processes``: the Dask worker processes (one thread
+    each) of a LOCAL cluster (None: Dask's default, one per core)."""
     distributed = require_dask()
     if isinstance(client, distributed.Client):
         yield client
         return
     if client == LOCAL:
-        if workers is not None:
-            check.positive_int("workers", workers)
-        with distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+        if processes is not None:
+            check.positive_int("processes", processes)
+        with distributed.LocalCluster(n_workers=processes, threads_per_worker=1, processes=True,
                                       dashboard_address=None) as cluster, \
                 distributed.Client(cluster) as local:
             yield local
@@ -97,6 +103,6 @@ def client_for(client, workers: int | None, timeout: float):
 
 
 def cluster_threads(client) -> tuple[int, int]:
-    """(workers, threads) of the cluster now."""
-    workers = client.scheduler_info().get("workers", {})
-    return len(workers), sum(int(w.get("nthreads", 1)) for w in workers.values())
+    """(processes, threads) of the cluster now: its Dask workers and their threads in all."""
+    processes = client.scheduler_info().get("workers", {})
+    return len(processes), sum(int(w.get("nthreads", 1)) for w in processes.values())

@@ -6,11 +6,11 @@ is the emitter's draw ``scene.spawn(n=size_b, seed=block_seed(seed, b))`` (``siz
 ``block`` but for a shorter last block). A shard is a run of whole blocks, so any shard draws the
 same spheres as a one-process run of the whole swarm: :func:`sharded_spawn` (all blocks) and
 :func:`shard_swarm` (some blocks) are the one draw both paths use, and the composed result is
-bit-identical whatever the number of workers or shards. Every block is checked clear of the
+bit-identical whatever the number of Dask processes or shards. Every block is checked clear of the
 obstacles, per sphere (the emitter's rejection sampling, then
 :func:`warpsim.feasibility.check_outside`), exactly as :meth:`warpsim.Scene.spawn` checks it.
 It is **not** the draw of ``scene.spawn(n, seed)`` (one stream for the whole swarm): a single
-stream cannot be split among workers without drawing all of it, so the sharded draw is its own
+stream cannot be split among processes without drawing all of it, so the sharded draw is its own
 (equally valid) sample; ``warpsim run`` uses it with or without ``--dask``/``--shards``, so the
 same command always simulates the same spheres. Changing
 ``block`` changes the draw; it is stored in every manifest.

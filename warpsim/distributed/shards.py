@@ -40,6 +40,7 @@ from ..swarm import Swarm
 from .cluster import (
     CONNECT_TIMEOUT,
     LOCAL,
+    WORKERS_RENAMED,
     client_for,
     cluster_threads,
     require_dask,
@@ -328,8 +329,8 @@ class RunSummary:
     Attributes:
         path: the root stage. shards: shard layers composed. recomputed: the shards computed
             by this run; reused: the complete layers kept from an earlier run.
-        workers: workers of the cluster (0 in process). workers_used: distinct workers (or
-            this process) that computed a shard.
+        processes: Dask worker processes of the cluster (0 in process). processes_used:
+            distinct worker processes (or this process) that computed a shard.
         spheres, frames: the swarm and the frames simulated (``start`` included).
         sphere_frames: of the recomputed shards. seconds: wall time of the whole run [s].
         task_seconds: sum of the recomputed tasks' wall times [s].
@@ -346,8 +347,8 @@ class RunSummary:
     shards: int
     recomputed: tuple[int, ...]
     reused: tuple[int, ...]
-    workers: int
-    workers_used: int
+    processes: int
+    processes_used: int
     spheres: int
     frames: int
     sphere_frames: int
@@ -369,7 +370,7 @@ class RunSummary:
 
     def lines(self) -> list[str]:
         per_sphere_frame = max(self.spheres * self.frames, 1)
-        where = (f"{self.workers_used} of {self.workers} workers" if self.workers
+        where = (f"{self.processes_used} of {self.processes} Dask processes" if self.processes
                  else "this process")
         recomputed = (f"{len(self.recomputed)} of {self.shards} shards recomputed"
                       + (f", {len(self.reused)} reused" if self.reused else ""))
@@ -401,11 +402,12 @@ def _default_shards(n: int, block: int, records: int, velocities: bool, tasks: i
 
 def run(scene, output, *, n: int | None = None, seed: int | None = None,
         frames: int | None = None, start: int = 0, every: int = 1, client=None,
-        shards: int | None = None, block: int = DEFAULT_BLOCK, workers: int | None = None,
+        shards: int | None = None, block: int = DEFAULT_BLOCK, processes: int | None = None,
         threads: int | None = None, dt: float | None = None, max_bounces: int | None = None,
         device: str | None = None, precision: str = "float32", broad_phase: str = "auto",
         velocities: bool = False, motion: str | None = None, progress: bool = True,
-        timeout: float = CONNECT_TIMEOUT, max_bytes: float | None = None) -> RunSummary:
+        timeout: float = CONNECT_TIMEOUT, max_bytes: float | None = None,
+        workers=None) -> RunSummary:
     """Simulate a scene's sharded swarm, one task and one USD layer per shard, and compose them.
 
     Args:
@@ -418,21 +420,22 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         frames: last frame simulated (default ``scene.frames``); frames ``start`` to
             ``frames`` are recorded, one in ``every`` (the last always).
         client: None runs the shards one after the other in this process (no Dask needed; the
-            reference run); ``"local"`` starts a ``LocalCluster`` of ``workers`` processes (one
+            reference run); ``"local"`` starts a ``LocalCluster`` of ``processes`` (one
             thread each) for this run; a scheduler address (``tcp://HOST:PORT``) or a
             ``distributed.Client`` uses that cluster.
         shards: number of shards (default: 4 per worker thread, more when a shard's records
             would pass 1 GiB; never more than the blocks).
         block: spheres per block of the draw (changing it changes the spheres).
-        workers: processes of a ``"local"`` cluster (default: one per core).
-        threads: CPU threads each shard's simulator launches from (default: 1 per Dask task,
-            every core in process).
+        processes: Dask worker processes of a ``"local"`` cluster (default: one per core).
+        threads: CPU threads each shard's simulator launches from (its ``workers``; default:
+            1 per Dask task, every core in process).
         dt, max_bounces, device, precision, broad_phase, motion: as :class:`warpsim.Simulator`
             (``motion`` only when given).
         velocities: also store velocities and angular velocities.
         progress: one tqdm bar over all shards' sphere-frames on standard error.
         timeout: seconds to wait for a scheduler at an address [s].
         max_bytes: refuse the run when the estimated output is larger [bytes] (None: no limit).
+        workers: removed (it was ``processes``); passing it is an error that says so.
 
     Returns:
         A :class:`RunSummary` (printable).
@@ -442,7 +445,10 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
             with its spheres).
         OSError: the output cannot be written; no scheduler at the address.
         ImportError: a client is asked for and dask is not installed (names the extra).
+        TypeError: ``workers`` given (renamed ``processes``).
     """
+    if workers is not None:
+        raise TypeError(WORKERS_RENAMED.format(what="run"))
     from ..export.files import check_writable
     from ..export.layers import shard_folder, shard_manifest, write_root_stage
 
@@ -465,8 +471,8 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         threads = check.positive_int("threads", threads)
     velocities = check.flag("velocities", velocities)
     timeout = check.scalar("timeout", timeout, positive=True)
-    if client is None and workers is not None:
-        raise ValueError("workers is the size of a 'local' cluster: it needs client='local'")
+    if client is None and processes is not None:
+        raise ValueError("processes is the size of a 'local' cluster: it needs client='local'")
     if isinstance(client, str) and client != LOCAL:
         client = scheduler_address(client)  # a bad address fails before any file is made
     out = check_writable(output, (".usdc", ".usda"), what="output")
@@ -503,11 +509,11 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         plan = plan_shards(n, shards or _default_shards(n, block, records.size, velocities, 1),
                            block)
         spec = _replace(spec, bounds=tuple(plan))
-        done, computed, cluster_workers = _run_here(scene, spec, progress)
+        done, computed, cluster_processes = _run_here(scene, spec, progress)
     else:
         require_dask()
-        with client_for(client, workers, timeout) as dask_client:
-            cluster_workers, threads_now = cluster_threads(dask_client)
+        with client_for(client, processes, timeout) as dask_client:
+            cluster_processes, threads_now = cluster_threads(dask_client)
             count = shards or _default_shards(n, block, records.size, velocities,
                                               TASKS_PER_THREAD * max(threads_now, 1))
             spec = _replace(spec, bounds=tuple(plan_shards(n, count, block)),
@@ -531,8 +537,8 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
     return RunSummary(
         path=out, shards=spec.count, recomputed=recomputed,
         reused=tuple(i for i in range(spec.count) if i not in computed),
-        workers=cluster_workers,
-        workers_used=len({done[i]["worker"] for i in computed}), spheres=n, frames=end,
+        processes=cluster_processes,
+        processes_used=len({done[i]["worker"] for i in computed}), spheres=n, frames=end,
         sphere_frames=sum(done[i]["sphere_frames"] for i in computed),
         seconds=time.perf_counter() - began,
         task_seconds=sum(done[i]["seconds"] for i in computed),

@@ -6,11 +6,11 @@ import sys
 from collections.abc import Callable, Iterable
 
 from .. import validation as check
-from .cluster import CONNECT_TIMEOUT, client_for, require_dask
+from .cluster import CONNECT_TIMEOUT, WORKERS_RENAMED, client_for, require_dask
 
 
-def sweep(function: Callable, items: Iterable, *, client=None, workers: int | None = None,
-          progress: bool = True, timeout: float = CONNECT_TIMEOUT) -> list:
+def sweep(function: Callable, items: Iterable, *, client=None, processes: int | None = None,
+          progress: bool = True, timeout: float = CONNECT_TIMEOUT, workers=None) -> list:
     """``[function(item) for item in items]``, one Dask task per item, results in order.
 
     For many scenes or settings at once, such as the accuracy study of several scenes
@@ -22,16 +22,20 @@ def sweep(function: Callable, items: Iterable, *, client=None, workers: int | No
         items: the arguments, one per task.
         client: as in :func:`run`: None in this process, ``"local"``, an address or a
             ``distributed.Client``.
-        workers: processes of a ``"local"`` cluster.
+        processes: Dask worker processes of a ``"local"`` cluster (default: one per core).
         progress: a tqdm bar over the items.
         timeout: seconds to wait for a scheduler at an address [s].
+        workers: removed (it was ``processes``); passing it is an error that says so.
 
     Returns:
         The results, in the order of ``items``.
 
     Raises:
         ValueError: an item's task failed (the message names the item's position).
+        TypeError: ``workers`` given (renamed ``processes``).
     """
+    if workers is not None:
+        raise TypeError(WORKERS_RENAMED.format(what="sweep"))
     items = list(items)
     if not callable(function):
         raise ValueError(f"function must be callable, got {type(function).__name__}")
@@ -55,7 +59,7 @@ def sweep(function: Callable, items: Iterable, *, client=None, workers: int | No
         require_dask()
         from distributed import as_completed
 
-        with client_for(client, workers, check.scalar("timeout", timeout, positive=True)) as c:
+        with client_for(client, processes, check.scalar("timeout", timeout, positive=True)) as c:
             futures = c.map(function, items, pure=False)
             index = {f.key: k for k, f in enumerate(futures)}
             results = [None] * len(items)
