@@ -321,18 +321,24 @@ def half_orientations(q, previous=None, previous_q=None) -> np.ndarray:
     q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
     out = np.empty(q.shape, dtype=np.float16)
     combos = (np.arange(16)[:, None] >> np.arange(4)[None, :]) & 1  # (16, 4): 0 below, 1 above
-    for start in range(0, q.shape[0], HALF_CHUNK):
-        chunk = q[start:start + HALF_CHUNK]
-        unit = chunk / np.linalg.norm(chunk, axis=1, keepdims=True)
-        near = unit.astype(np.float16)
-        near64 = near.astype(np.float64)
-        below = np.where(near64 > unit, np.nextafter(near, np.float16(-np.inf)), near)
-        above = np.where(near64 < unit, np.nextafter(near, np.float16(np.inf)), near)
+    unit = q / np.linalg.norm(q, axis=1, keepdims=True)
+    near = unit.astype(np.float16)
+    # a row whose components are all half values (the identity of a swarm that never turned)
+    # has one candidate only, 16 times: it is its own best, no matrix needed
+    exact = np.all(near.astype(np.float64) == unit, axis=1)
+    out[exact] = near[exact]
+    rows = np.flatnonzero(~exact)
+    for start in range(0, rows.size, HALF_CHUNK):
+        chunk = rows[start:start + HALF_CHUNK]
+        unit_c = unit[chunk]
+        near_c = near[chunk]
+        near64 = near_c.astype(np.float64)
+        below = np.where(near64 > unit_c, np.nextafter(near_c, np.float16(-np.inf)), near_c)
+        above = np.where(near64 < unit_c, np.nextafter(near_c, np.float16(np.inf)), near_c)
         candidates = np.where(combos[None] == 1, above[:, None, :], below[:, None, :])
         error = np.abs(_rotation_entries(candidates.astype(np.float64))
-                       - _rotation_entries(unit)[:, None, :]).max(axis=2)
-        best = candidates[np.arange(chunk.shape[0]), np.argmin(error, axis=1)]
-        out[start:start + chunk.shape[0]] = best
+                       - _rotation_entries(unit_c)[:, None, :]).max(axis=2)
+        out[chunk] = candidates[np.arange(chunk.size), np.argmin(error, axis=1)]
     if previous is not None:
         flip = (out.astype(np.float64) * np.asarray(previous, dtype=np.float64)).sum(axis=1) < 0
         out[flip] = -out[flip]

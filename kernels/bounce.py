@@ -126,8 +126,9 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
         Returns:
             ``(position, velocity, L, energy, bounces, capped, supported)``: ``velocity`` is the
             one at the frame's end [m/s] (before any energy reset); ``bounces`` counts
-            the contacts taken, ``capped`` is 1 when the cap stopped the sphere at its last
-            contact, ``supported`` is 1 when one of them was a resting contact.
+            the contacts taken (resting ones included), ``capped`` is 1 when the cap stopped
+            the sphere at its last contact, ``supported`` counts the resting (support)
+            contacts among them.
         """
         g = physics.gravity
         dt = physics.dt
@@ -169,7 +170,7 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
                     on_contact.event(frame, sphere, box, int(resting), contact, n, travelled,
                                      wp.max(speed, ZERO), events)
                 if resting:
-                    supported = 1
+                    supported += 1
                     support = n
                     w = w - vn * n
                     d = (ONE - t) * (d - dn * n)
@@ -186,7 +187,7 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
         # the velocity at the frame's end: the second half kick; a support takes its part into
         # the surface (the sphere ends on it, its normal velocity 0, as at the frame's start)
         v = w + half_kick
-        if supported == 1:
+        if supported > 0:
             into = wp.dot(v, support)
             if into < ZERO:
                 v = v - into * support

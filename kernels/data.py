@@ -50,6 +50,9 @@ class Features:
         events: write every contact into the launch's event buffer.
         births: some sphere is born after frame 0: the frame kernel skips each sphere's frames
             before its ``birth_frame`` (no move, no contact, no count).
+        free_flight: the frame kernel's free-flight step (a frame whose path lies beyond every
+            box's bounds skips the bounce loop; the same bits either way): for swarms that fly
+            outside the obstacles' overall bounds; a closed room has no use for its test.
 
     ``motion`` and ``broad_phase`` may be any ``str`` (an enumeration of ``str`` included):
     they compare and hash as their text.
@@ -63,6 +66,7 @@ class Features:
     energy_correction: bool = False
     events: bool = False
     births: bool = False
+    free_flight: bool = False
 
     def __post_init__(self):
         for name, allowed in (("precision", PRECISIONS), ("motion", MOTIONS),
@@ -70,7 +74,7 @@ class Features:
             value = getattr(self, name)
             if not isinstance(value, str) or value not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
-        for name in ("spin", "lossy", "energy_correction", "events", "births"):
+        for name in ("spin", "lossy", "energy_correction", "events", "births", "free_flight"):
             object.__setattr__(self, name, bool(getattr(self, name)))
 
     def but(self, **changes) -> "Features":
@@ -107,6 +111,12 @@ def model_structs(p: Precision) -> ModelStructs:
         extent: wp.array[vec3]
         """Half sizes of each rounded box's world-axis-aligned bounding box [m], shape (K,), for
         the cheap per-box reject."""
+        lower: vec3
+        """Lowest corner [m] of a world box holding every box's reject bounds (``center -
+        extent (1 + REJECT_SLACK)``), rounded outward; without boxes above ``upper`` (empty)."""
+        upper: vec3
+        """Highest corner [m] of that box: a path whose bounds lie beyond it on one axis meets
+        no box (the frame kernel's free-flight step)."""
 
     @wp.struct
     class BroadPhase:

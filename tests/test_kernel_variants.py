@@ -44,7 +44,8 @@ COLLIDE_OUTPUTS = {"box_out", "t_out", "contact_out", "normal_out", "new_positio
                    "new_velocity_out"}
 BOUNCE_OUTPUTS = {"bounces_out", "capped_out", "position_out", "velocity_out",
                   "angular_momentum_out"}
-FRAME_COUNTERS = {"bounce_count_out", "capped_count_out", "record_position_out",
+FRAME_COUNTERS = {"bounce_count_out", "support_count_out", "capped_count_out",
+                  "record_position_out",
                   "record_orientation_out", "record_velocity_out",
                   "record_angular_velocity_out"}
 #: Plain per-launch values (the launch helper's ``values``).

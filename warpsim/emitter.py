@@ -194,24 +194,47 @@ class Emitter:
             raise ValueError(f"boxes must be a warpsim.RoundedBoxes, got {type(boxes).__name__}")
         n = self.count if n is None else check.positive_int("n", n)
         seed = self.seed if seed is None else check.positive_int("seed", seed, minimum=0)
+        return self.spawn_many(boxes, [n], [seed], dt)[0]
+
+    def spawn_many(self, boxes: RoundedBoxes, counts, seeds,
+                   dt: float | None = None) -> list[Swarm]:
+        """Draw several swarms at once: ``[spawn(boxes, n, seed, dt) for n, seed in
+        zip(counts, seeds)]``, the same arrays bit for bit, with the clearance of every swarm's
+        pending spheres tested in one query per round (a sharded draw of many small blocks).
+
+        Args:
+            boxes: the obstacles (never modified).
+            counts, seeds: one ``n`` (>= 1) and one ``seed`` (>= 0) per swarm, already checked.
+            dt: as :meth:`spawn`'s.
+
+        Raises:
+            ValueError: as :meth:`spawn`, for the first swarm that cannot be placed.
+        """
         self._check_radius_fits(boxes)
-        # One independent stream per quantity: changing the velocity rule leaves the positions
-        # (and radii, masses) of a seed unchanged.
-        radius_rng, mass_rng, velocity_rng, position_rng = (
-            np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4))
-        radius = radius_rng.uniform(*self.radius, size=n)
-        mass = mass_rng.uniform(*self.mass, size=n)
-        velocity = self._velocities(velocity_rng, n)
-        position = self._positions(position_rng, boxes, radius)
-        births = 0
-        if self.emits_over_time:
-            if dt is None:
-                raise ValueError("this emitter emits over time (start, rate or duration): "
-                                 "spawn it with the run's dt")
-            births = self.birth_frames(dt, n)
-        return Swarm(position=position, velocity=velocity, radius=radius, mass=mass,
-                     angular_momentum=np.tile(np.asarray(self.angular_momentum), (n, 1)),
-                     birth_frame=births)
+        parts = []
+        for n, seed in zip(counts, seeds, strict=True):
+            # One independent stream per quantity: changing the velocity rule leaves the
+            # positions (and radii, masses) of a seed unchanged.
+            radius_rng, mass_rng, velocity_rng, position_rng = (
+                np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4))
+            radius = radius_rng.uniform(*self.radius, size=n)
+            mass = mass_rng.uniform(*self.mass, size=n)
+            velocity = self._velocities(velocity_rng, n)
+            births = 0
+            if self.emits_over_time:
+                if dt is None:
+                    raise ValueError("this emitter emits over time (start, rate or duration): "
+                                     "spawn it with the run's dt")
+                births = self.birth_frames(dt, n)
+            parts.append((radius, mass, velocity, births, position_rng))
+        positions = self._positions([rng for *_, rng in parts], boxes,
+                                    [radius for radius, *_ in parts])
+        return [Swarm(position=position, velocity=velocity, radius=radius, mass=mass,
+                      angular_momentum=np.tile(np.asarray(self.angular_momentum),
+                                               (radius.shape[0], 1)),
+                      birth_frame=births)
+                for (radius, mass, velocity, births, _), position
+                in zip(parts, positions, strict=True)]
 
     def _region(self) -> str:
         return f"center {list(self.center)}, half_extents {list(self.half_extents)}"
@@ -252,36 +275,51 @@ class Emitter:
              + (sin_theta * np.sin(phi))[:, None] * w)
         return velocity + speed[:, None] * d
 
-    def _positions(self, rng: np.random.Generator, boxes: RoundedBoxes,
-                   radius: np.ndarray) -> np.ndarray:
-        n = radius.shape[0]
+    def _positions(self, rngs: list, boxes: RoundedBoxes,
+                   radii: list[np.ndarray]) -> list[np.ndarray]:
+        """The centres of each swarm (its own stream ``rngs[j]``, radii ``radii[j]``): every
+        sphere drawn again until it is clear, the pending spheres of all swarms tested together
+        (a point's distance does not depend on the others: each swarm's draws are its own)."""
         center = np.asarray(self.center)
         half = np.asarray(self.half_extents)
-        position = center + half * rng.uniform(-1.0, 1.0, size=(n, 3))
-        pending = np.arange(n)
+        positions = [center + half * rng.uniform(-1.0, 1.0, size=(r.shape[0], 3))
+                     for rng, r in zip(rngs, radii, strict=True)]
+        pending = [np.arange(r.shape[0]) for r in radii]
         if len(boxes) == 0:
-            return position
+            return positions
         for rounds in range(1, MAX_PLACEMENT_ROUNDS + 1):
-            need = radius[pending] + self.clearance
-            distance, _ = boxes.nearest(position[pending], within=need)
-            pending = pending[~(distance >= need)]
-            if pending.size == 0:
-                return position
-            if (pending.size == n and HOPELESS_ROUNDS <= rounds < MAX_PLACEMENT_ROUNDS
-                    and rounds * n >= MAX_PLACEMENT_ROUNDS):
-                raise ValueError(
-                    f"emitter region is too crowded: not one of {rounds * n} draws ({rounds} for "
-                    f"each of the {n} spheres) was clear of the obstacles (signed distance >= "
-                    f"radius + clearance), so spawning stopped early; the obstacles fill "
-                    f"(almost) all of the region ({self._region()}): move or enlarge it, or use "
-                    f"smaller spheres")
-            if rounds < MAX_PLACEMENT_ROUNDS:
-                position[pending] = center + half * rng.uniform(-1.0, 1.0, size=(pending.size, 3))
+            active = [j for j, p in enumerate(pending) if p.size]
+            need = [radii[j][pending[j]] + self.clearance for j in active]
+            distance, _ = boxes.nearest(
+                np.concatenate([positions[j][pending[j]] for j in active]),
+                within=np.concatenate(need))
+            offset = 0
+            for j, need_j in zip(active, need, strict=True):
+                n = radii[j].shape[0]
+                clear = distance[offset:offset + need_j.size] >= need_j
+                offset += need_j.size
+                pending[j] = pending[j][~clear]
+                if pending[j].size == 0:
+                    continue
+                if (pending[j].size == n and HOPELESS_ROUNDS <= rounds < MAX_PLACEMENT_ROUNDS
+                        and rounds * n >= MAX_PLACEMENT_ROUNDS):
+                    raise ValueError(
+                        f"emitter region is too crowded: not one of {rounds * n} draws ({rounds} "
+                        f"for each of the {n} spheres) was clear of the obstacles (signed "
+                        f"distance >= radius + clearance), so spawning stopped early; the "
+                        f"obstacles fill (almost) all of the region ({self._region()}): move or "
+                        f"enlarge it, or use smaller spheres")
+                if rounds < MAX_PLACEMENT_ROUNDS:
+                    positions[j][pending[j]] = center + half * rngs[j].uniform(
+                        -1.0, 1.0, size=(pending[j].size, 3))
+            if not any(p.size for p in pending):
+                return positions
+        j = next(j for j, p in enumerate(pending) if p.size)
         raise ValueError(
-            f"emitter region is too crowded: {pending.size} of {n} spheres were not clear of the "
-            f"obstacles (signed distance >= radius + clearance) in {MAX_PLACEMENT_ROUNDS} draws "
-            f"each; the obstacles fill almost all of the region ({self._region()}): move or "
-            f"enlarge it, or use smaller spheres")
+            f"emitter region is too crowded: {pending[j].size} of {radii[j].shape[0]} spheres "
+            f"were not clear of the obstacles (signed distance >= radius + clearance) in "
+            f"{MAX_PLACEMENT_ROUNDS} draws each; the obstacles fill almost all of the region "
+            f"({self._region()}): move or enlarge it, or use smaller spheres")
 
 
 def _orthonormal_pair(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

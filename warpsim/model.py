@@ -44,7 +44,8 @@ class Model:
 
     Attributes:
         boxes: the obstacles (``Boxes``: centres, rotations local -> world, core half extents,
-            rounding radii, world bounding-box half sizes; ``K`` boxes, world frame).
+            rounding radii, world bounding-box half sizes, and the box holding all their reject
+            bounds; ``K`` boxes, world frame).
         broad: the broad phase's data (``BroadPhase``: the BVH's id, 0 when none was built,
             and the uniform grid of :class:`warpsim.broad_phase.Grid`, a single empty cell when
             the scene runs without one; kernels built without them never read them).
@@ -159,6 +160,15 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
                                          device=device)
     device_boxes.radius = wp.array(boxes.radius.astype(dtype), dtype=p.scalar, device=device)
     device_boxes.extent = wp.array(extent, dtype=p.vec3, device=device)
+    # the box holding every box's reject bounds, for the frame kernel's free-flight step: the
+    # per-box bounds are padded and rounded outward to float32, which either precision holds
+    if len(boxes):
+        lower, upper = bvh_bounds(center, extent)
+        device_boxes.lower = p.vec3(*lower.min(axis=0).astype(np.float64))
+        device_boxes.upper = p.vec3(*upper.max(axis=0).astype(np.float64))
+    else:  # empty: every path lies beyond it
+        device_boxes.lower = p.vec3(np.inf, np.inf, np.inf)
+        device_boxes.upper = p.vec3(-np.inf, -np.inf, -np.inf)
     broad = _broad_phase(structs.BroadPhase(), grid if kind is not None else None, p, device)
     if isinstance(grid, WalkGrid) and len(grid.cell_boxes):
         bounds = np.stack([center[grid.cell_boxes], extent[grid.cell_boxes]], axis=1)

@@ -6,6 +6,7 @@ import os
 
 from . import feasibility
 from . import validation as check
+from .emitter import Emitter
 from .obstacles import RoundedBoxes
 from .scene_files import SceneFileError, read_scene_file
 
@@ -106,7 +107,10 @@ class Scene:
 
         Returns:
             A :class:`warpsim.Swarm`; the same ``seed`` gives the same swarm. No sphere starts
-            inside an obstacle (checked with ``warpsim.feasibility.check_outside``).
+            inside an obstacle: a :class:`warpsim.Emitter` keeps only spheres whose signed
+            distance is at least their radius plus the clearance (``>= 0``), by the distances
+            ``warpsim.feasibility.check_outside`` reads, so that check could never refuse one;
+            any other emitter's swarm is checked with it.
 
         Raises:
             ValueError: when the scene has no emitter, for a bad ``n`` or ``seed``, or when the
@@ -124,12 +128,36 @@ class Scene:
             timing = ({"dt": self.dt if dt is None else dt}
                       if getattr(self.emitter, "emits_over_time", False) else {})
             swarm = self.emitter.spawn(self.boxes, n=n, seed=seed, **timing)
-            feasibility.check_outside(self.boxes, swarm.position, swarm.radius, "float64")
+            if not isinstance(self.emitter, Emitter):  # an emitter of its own: checked here
+                feasibility.check_outside(self.boxes, swarm.position, swarm.radius, "float64")
         except ValueError as exc:
             if self.source is None:
                 raise
             raise SceneFileError(f"{os.path.basename(self.source)}: {exc}") from exc
         return swarm
+
+    def spawn_many(self, counts, seeds, dt: float | None = None) -> list:
+        """Several swarms of this scene's emitter at once, each as ``spawn(n, seed, dt)`` gives
+        it bit for bit (:meth:`warpsim.Emitter.spawn_many`: the clearance of all of them tested
+        together); ``counts`` (each >= 1) and ``seeds`` (each >= 0) pair up.
+
+        Raises:
+            ValueError: as :meth:`spawn`.
+        """
+        if self.emitter is None:
+            raise ValueError(f"scene {self.name!r} has no emitter; build a warpsim.Swarm instead")
+        counts = [check.positive_int("n", n) for n in counts]
+        seeds = [check.positive_int("seed", seed, minimum=0) for seed in seeds]
+        if not isinstance(self.emitter, Emitter):
+            return [self.spawn(n, seed, dt) for n, seed in zip(counts, seeds, strict=True)]
+        try:
+            return self.emitter.spawn_many(
+                self.boxes, counts, seeds,
+                (self.dt if dt is None else dt) if self.emitter.emits_over_time else None)
+        except ValueError as exc:
+            if self.source is None:
+                raise
+            raise SceneFileError(f"{os.path.basename(self.source)}: {exc}") from exc
 
     def __repr__(self) -> str:
         return f"Scene({self.name!r}, {len(self.boxes)} boxes)"

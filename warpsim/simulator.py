@@ -14,7 +14,7 @@ import warp as wp
 from . import broad_phase as broad
 from . import feasibility
 from . import validation as check
-from .device import resolve_device
+from .device import bvh_bounds, resolve_device
 from .kernels import precision as fp
 from .kernels.data import Features
 from .kernels.frame_kernel import frame_kernel
@@ -55,7 +55,10 @@ class Stats:
     Attributes:
         frames: frames advanced. sphere_frames: frames simulated, summed over the spheres (a
             sphere born at frame ``b`` counts those after ``b`` only).
-        bounces: contacts taken, all spheres (resting contacts on a support included).
+        bounces: bounces taken, all spheres (contacts that reflect; resting contacts are in
+            ``supports``).
+        supports: resting or sliding contacts on a support, all spheres (a sphere at rest on
+            a floor makes about one a frame).
         capped: sphere-frames stopped by ``max_bounces``.
         capped_spheres: spheres stopped by the cap at least once.
         seconds: wall time spent in :meth:`Simulator.step` and :meth:`Simulator.run` [s].
@@ -75,6 +78,12 @@ class Stats:
     seconds: float
     broad_phase: str = ""
     requested_broad_phase: str = ""
+    supports: int = 0
+
+    @property
+    def contacts(self) -> int:
+        """Contacts of every kind: ``bounces + supports``."""
+        return self.bounces + self.supports
 
     @property
     def sphere_frames_per_second(self) -> float:
@@ -195,7 +204,8 @@ class Simulator:
                                   broad_phase=self.broad_phase, spin=self.spin,
                                   lossy=scene.energy_retention < 1.0,
                                   energy_correction=self.energy_correction,
-                                  births=swarm.has_births)
+                                  births=swarm.has_births,
+                                  free_flight=_starts_in_free_flight(scene.boxes, swarm))
         self._kernel = frame_kernel(self._features)
         self._upload(swarm)
         self._shards = _shards(self._n, self.workers)
@@ -233,8 +243,10 @@ class Simulator:
         self.state_1 = self.state_0.empty_like(share=unwritten)
         """The state the next launch writes; swapped with :attr:`state_0` after it."""
         self.counters = {"bounce_count_out": wp.zeros(self._n, dtype=wp.int32, device=dev),
+                         "support_count_out": wp.zeros(self._n, dtype=wp.int32, device=dev),
                          "capped_count_out": wp.zeros(self._n, dtype=wp.int32, device=dev)}
-        """Per-sphere counters the kernel adds to (contacts taken, sphere-frames capped)."""
+        """Per-sphere counters the kernel adds to (bounces, resting contacts, sphere-frames
+        capped)."""
         self._initial_energy = energy
 
     def _arguments(self, kernel, rows: slice | None, values: dict, records: dict,
@@ -561,12 +573,14 @@ class Simulator:
 
     @property
     def stats(self) -> Stats:
-        """Bounce and cap counters since the start, and the time spent stepping."""
+        """Bounce, support and cap counters since the start, and the time spent stepping."""
         capped = self.counters["capped_count_out"].numpy()
         bounces = self.counters["bounce_count_out"].numpy()
+        supports = self.counters["support_count_out"].numpy()
         lived = np.clip(self.frame - self.birth_frame, 0, None)
         return Stats(frames=self.frame, sphere_frames=int(lived.sum()),
                      bounces=int(bounces.astype(np.int64).sum()),
+                     supports=int(supports.astype(np.int64).sum()),
                      capped=int(capped.astype(np.int64).sum()),
                      capped_spheres=int(np.count_nonzero(capped)), seconds=self._seconds,
                      broad_phase=self.broad_phase,
@@ -583,6 +597,20 @@ def _energy_origin(scene: Scene, swarm: Swarm) -> np.ndarray:
     if len(pts) == 0:
         return np.zeros(3)
     return 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+
+
+def _starts_in_free_flight(boxes, swarm: Swarm) -> bool:
+    """Whether some sphere starts beyond the box holding every obstacle's reject bounds (the
+    device model's ``Boxes.lower`` / ``upper``): then the kernel is built with the free-flight
+    step (the same bits either way). Spheres that start inside it, as in a closed room, stay
+    near the boxes, and the step's test would only cost them time."""
+    if len(boxes) == 0 or len(swarm) == 0:
+        return False
+    lower, upper = bvh_bounds(boxes.center, boxes.world_extent())
+    r = swarm.radius[:, None]
+    beyond = ((swarm.position - r > upper.max(axis=0))
+              | (swarm.position + r < lower.min(axis=0)))
+    return bool(beyond.any())
 
 
 def _host(array: wp.array) -> np.ndarray:

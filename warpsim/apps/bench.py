@@ -93,8 +93,9 @@ def measure(scene_name: str, count: int | None = None, frames: int | None = None
 
     Returns:
         The figures: seconds [s] of the set-up, the build and the timed frames,
-        ``sphere_frames_per_s``, ``ns_per_sphere_frame``, ``bounces_per_sphere_frame`` and
-        ``capped`` over the timed frames, what the simulator chose, machine and versions.
+        ``sphere_frames_per_s``, ``ns_per_sphere_frame``, ``bounces_per_sphere_frame``,
+        ``supports_per_sphere_frame`` (resting contacts) and ``capped`` over the timed
+        frames, what the simulator chose, machine and versions.
 
     Raises:
         ValueError: a bad scene, option or device, in one line.
@@ -132,6 +133,7 @@ def measure(scene_name: str, count: int | None = None, frames: int | None = None
         "seconds": seconds, "sphere_frames_per_s": sphere_frames / seconds,
         "ns_per_sphere_frame": seconds / sphere_frames * 1e9,
         "bounces_per_sphere_frame": (last.bounces - first.bounces) / sphere_frames,
+        "supports_per_sphere_frame": (last.supports - first.supports) / sphere_frames,
         "capped": last.capped - first.capped,
         "machine": machine(sim.device)}
 

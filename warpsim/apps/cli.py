@@ -15,7 +15,7 @@ import sys
 
 import numpy as np
 
-from ..vocabulary import BroadPhase, ContactKind
+from ..vocabulary import BroadPhase
 from .options import add_simulation_options
 from .startup import check_device, init_warp
 
@@ -484,16 +484,13 @@ def finish_outputs(outputs, debug: bool) -> int:
 
 
 def bounce_line(stats, events=None) -> str:
-    """The summary's contact line. The counters take bounces and resting (supporting)
-    contacts together; a complete contact table (``events``) tells them apart."""
+    """The summary's contact line: the bounces and the resting (supporting) contacts, each
+    counted by the kernel; ``events`` is not needed (kept for callers that pass it)."""
     per = stats.bounces / max(stats.sphere_frames, 1)
-    if events is not None and not events.dropped:
-        supports = int(np.count_nonzero(events.kind == ContactKind.SUPPORT))
-        kinds = f"{len(events) - supports:,} bounces, {supports:,} resting or sliding"
-    else:
-        kinds = "bounces and resting contacts together; --events counts them apart"
-    return (f"contacts: {stats.bounces:,} ({kinds}; {per:.3f} per sphere-frame); capped: "
-            f"{stats.capped:,} sphere-frames, {stats.capped_spheres} spheres")
+    per_support = stats.supports / max(stats.sphere_frames, 1)
+    return (f"contacts: {stats.bounces:,} bounces ({per:.3f} per sphere-frame), "
+            f"{stats.supports:,} resting or sliding ({per_support:.3f} per sphere-frame); "
+            f"capped: {stats.capped:,} sphere-frames, {stats.capped_spheres} spheres")
 
 
 def describe_broad_phase(ran: str, requested: str) -> str:

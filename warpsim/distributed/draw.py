@@ -144,8 +144,14 @@ def shard_swarm(scene: Scene, n: int | None, seed: int | None, start: int, stop:
     if start % block or (stop % block and stop != n):
         raise ValueError(f"spheres {start}..{stop} are not whole blocks of {block} (a shard "
                          f"starts and ends on a multiple of block, or ends at n = {n})")
-    parts = [spawn_block(scene, n, seed, b, block, dt)
-             for b in range(start // block, block_count(stop, block))]
+    # the blocks drawn together (each as spawn_block draws it, bit for bit)
+    dt = scene.dt if dt is None else dt
+    blocks = range(start // block, block_count(stop, block))
+    sizes = [min(block, n - b * block) for b in blocks]
+    parts = scene.spawn_many(sizes, [block_seed(seed, b) for b in blocks], dt=dt)
+    if getattr(scene.emitter, "emits_over_time", False):
+        parts = [_with(part, birth_frame=scene.emitter.birth_frames(dt, n, b * block, size))
+                 for part, b, size in zip(parts, blocks, sizes, strict=True)]
     return _joined(parts)
 
 

@@ -175,7 +175,7 @@ def simulate_shard(scene: Scene, spec: RunSpec, index: int,
 
     Returns:
         ``index``, ``digest`` of the layer's arrays, ``seconds`` (wall, the whole task),
-        ``sphere_frames``, ``bounces``, ``capped``, ``worker`` (its address).
+        ``sphere_frames``, ``bounces``, ``supports``, ``capped``, ``worker`` (its address).
     """
     from ..export.layers import write_shard_layer
     from ..trajectory import Trajectory
@@ -210,13 +210,15 @@ def simulate_shard(scene: Scene, spec: RunSpec, index: int,
     digest = write_shard_layer(spec.layer_path(index), trajectory,
                                np.arange(start, stop, dtype=np.int64), index, spec.count,
                                {"key": key, "start": int(start), "stop": int(stop),
-                                "bounces": int(stats.bounces), "capped": int(stats.capped),
+                                "bounces": int(stats.bounces),
+                                "supports": int(stats.supports), "capped": int(stats.capped),
                                 "capped_spheres": int(stats.capped_spheres),
                                 "energy": energy},
                                velocities=spec.velocities)
     return {"index": int(index), "digest": digest, "key": key,
             "seconds": time.perf_counter() - begin, "sphere_frames": int(stats.sphere_frames),
-            "bounces": int(stats.bounces), "capped": int(stats.capped),
+            "bounces": int(stats.bounces), "supports": int(stats.supports),
+            "capped": int(stats.capped),
             "capped_spheres": int(stats.capped_spheres), "energy": energy,
             "worker": _worker_name()}
 
@@ -332,7 +334,9 @@ class RunSummary:
         spheres, frames: the swarm and the frames simulated (``start`` included).
         sphere_frames: of the recomputed shards. seconds: wall time of the whole run [s].
         task_seconds: sum of the recomputed tasks' wall times [s].
-        bounces, capped: contact and cap counters of all shards (reused ones included).
+        bounces, capped: bounce and cap counters of all shards (reused ones included).
+        supports: resting or sliding contacts of all shards, or None when a reused shard's
+            layer, from an earlier version, does not say (its ``bounces`` then count both).
         capped_spheres: spheres stopped by the cap at least once (None when a reused shard's
             layer, from an earlier version, does not say).
         energy: the energy figures of the whole swarm (:func:`warpsim.energy_figures.combine`
@@ -354,6 +358,7 @@ class RunSummary:
     capped: int
     capped_spheres: int | None = None
     energy: dict | None = None
+    supports: int | None = None
     digests: tuple[str, ...] = field(default=(), repr=False)
     computed_by: dict[int, str] = field(default_factory=dict, repr=False)
     """Shard -> the worker (address) that computed it, for the recomputed shards."""
@@ -373,8 +378,11 @@ class RunSummary:
                  else "nothing simulated: every shard was current")
         return [f"simulated {self.frames} frames x {self.spheres:,} spheres in {self.shards} "
                 f"shards on {where}: {recomputed}; {self.seconds:.2f} s, {speed}",
-                f"contacts: {self.bounces:,} (bounces and resting contacts together; "
-                f"{self.bounces / per_sphere_frame:.3f} per sphere-frame); capped: "
+                (f"contacts: {self.bounces:,} (bounces and resting contacts together: a "
+                 f"reused shard layer does not tell them apart; "
+                 if self.supports is None else
+                 f"contacts: {self.bounces:,} bounces, {self.supports:,} resting or sliding ("
+                 ) + f"{self.bounces / per_sphere_frame:.3f} bounces per sphere-frame); capped: "
                 f"{self.capped:,} sphere-frames"
                 + ("" if self.capped_spheres is None else f", {self.capped_spheres} spheres"),
                 _energy_text(self.energy),
@@ -525,6 +533,7 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         "n": n, "seed": seed, "block": block, "frames": end, "every": every})
     _remove_stale_layers(folder, layers)
     recomputed = tuple(sorted(computed))
+    together = any(r.get("supports") is None for r in results)
     return RunSummary(
         path=out, shards=spec.count, recomputed=recomputed,
         reused=tuple(i for i in range(spec.count) if i not in computed),
@@ -533,7 +542,12 @@ def run(scene, output, *, n: int | None = None, seed: int | None = None,
         sphere_frames=sum(done[i]["sphere_frames"] for i in computed),
         seconds=time.perf_counter() - began,
         task_seconds=sum(done[i]["seconds"] for i in computed),
-        bounces=sum(r["bounces"] for r in results), capped=sum(r["capped"] for r in results),
+        # a layer of an earlier version counts its resting contacts among its bounces: then
+        # the summary gives every contact together
+        bounces=sum(r["bounces"] for r in results) + (
+            sum(int(r.get("supports") or 0) for r in results) if together else 0),
+        capped=sum(r["capped"] for r in results),
+        supports=None if together else sum(int(r["supports"]) for r in results),
         capped_spheres=(None if any(r.get("capped_spheres") is None for r in results)
                         else sum(int(r["capped_spheres"]) for r in results)),
         energy=(None if any(not isinstance(r.get("energy"), dict) for r in results)
@@ -584,6 +598,7 @@ def _reusable(spec: RunSpec) -> dict[int, dict]:
         if manifest is not None and manifest.get("key") == spec.shard_key(i):
             found[i] = {"index": i, "key": manifest["key"], "digest": manifest["digest"],
                         "bounces": int(manifest.get("bounces", 0)),
+                        "supports": manifest.get("supports"),
                         "capped": int(manifest.get("capped", 0)),
                         "capped_spheres": manifest.get("capped_spheres"),
                         "energy": manifest.get("energy")}

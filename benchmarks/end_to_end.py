@@ -1,0 +1,128 @@
+"""End to end: what a ``warpsim run`` spends in each stage, against its simulation.
+
+Run from the repository root:
+``python -m benchmarks.end_to_end [--quick] [--repeats R] [--n N] [--out PATH]``.
+
+The command of issue 20, ``warpsim run room -n 200000 --frames 120 --every 10`` (quick: 20 000
+spheres), is timed two ways, the two taking turns ``R`` times in fresh processes:
+
+1. the whole command, ``python -m warpsim run ...`` as a user types it (wall time of the process,
+   interpreter start-up included);
+2. the same stages in one fresh process, each timed apart, in the order the command runs them:
+   ``imports`` (``import warpsim``, then the USD writer, which loads ``pxr``), ``scene``
+   (``Scene.load``), ``draw`` (the sharded draw of the swarm the command simulates),
+   ``set-up`` (``Simulator``: checks, broad phase, upload), ``build`` (the kernel, from Warp's
+   cache), ``simulation`` (``Simulator.run``, the recorded frames copied out) and ``output``
+   (``export.write_usd``).
+
+Both run outside the source tree, so that they import the installed package (or the one
+``PYTHONPATH`` names: the same benchmark for another checkout). The table gives the median
+seconds of each stage (wall time), its share of the stages' sum and
+the whole command over its simulation time (issue 20's goal: within 4x). A shared machine
+stretches every stage alike, so the ratios are the figures to compare.
+"""
+
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from .common import finish, parser, print_table, start
+
+SCENE = "room"
+FRAMES = 120
+EVERY = 10
+STAGES = ("imports", "scene", "draw", "set-up", "build", "simulation", "output")
+
+#: One process's stage times: prints one JSON line.
+CHILD = r"""
+import json, sys, time
+t = {}
+t0 = time.perf_counter()
+import warpsim as ws
+from warpsim.apps.startup import init_warp
+init_warp(debug=False)
+from warpsim import export
+from warpsim.export import usd_write  # noqa: F401 - loads pxr, as the command's output does
+t["imports"] = time.perf_counter() - t0
+scene_name, out = sys.argv[1], sys.argv[5]
+n, frames, every = (int(a) for a in sys.argv[2:5])
+t0 = time.perf_counter()
+scene = ws.Scene.load(scene_name)
+t["scene"] = time.perf_counter() - t0
+from warpsim.distributed.draw import DEFAULT_BLOCK, sharded_spawn
+t0 = time.perf_counter()
+swarm = sharded_spawn(scene, n, None, DEFAULT_BLOCK)
+t["draw"] = time.perf_counter() - t0
+t0 = time.perf_counter()
+sim = ws.Simulator(scene, swarm)
+t["set-up"] = time.perf_counter() - t0
+t0 = time.perf_counter()
+sim.build()
+t["build"] = time.perf_counter() - t0
+t0 = time.perf_counter()
+traj = sim.run(frames, every=every)
+t["simulation"] = time.perf_counter() - t0
+t0 = time.perf_counter()
+export.write_usd(out, scene, traj, warn=False)
+t["output"] = time.perf_counter() - t0
+print(json.dumps(t))
+"""
+
+
+def stage_times(n: int, out: Path) -> dict:
+    result = subprocess.run([sys.executable, "-c", CHILD, SCENE, str(n), str(FRAMES), str(EVERY),
+                             str(out)], check=True, capture_output=True, text=True,
+                            cwd=tempfile.gettempdir())
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
+def command_time(n: int, out: Path) -> float:
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "warpsim", "run", SCENE, "-n", str(n), "--frames",
+                    str(FRAMES), "--every", str(EVERY), "-o", str(out), "--no-progress"],
+                   check=True, capture_output=True, text=True, cwd=tempfile.gettempdir())
+    return time.perf_counter() - t0
+
+
+def main(argv=None) -> None:
+    p = parser("end_to_end", __doc__)
+    p.add_argument("--repeats", type=int, default=None, help="turns (default 3)")
+    p.add_argument("--n", type=int, default=None, help="spheres (default 200 000)")
+    args = p.parse_args(argv)
+    started = time.perf_counter()
+    _, info, out = start("end_to_end", args)
+    n = args.n or (20_000 if args.quick else 200_000)
+    repeats = args.repeats or (1 if args.quick else 3)
+    samples = {stage: [] for stage in STAGES}
+    whole = []
+    with tempfile.TemporaryDirectory() as tmp:
+        usd = Path(tmp) / "room.usdc"
+        command_time(n, usd)  # warm-up: the kernel cache, the file system
+        for _ in range(repeats):
+            for stage, seconds in stage_times(n, usd).items():
+                samples[stage].append(seconds)
+            whole.append(command_time(n, usd))
+    median = {stage: statistics.median(values) for stage, values in samples.items()}
+    total = sum(median.values())
+    command = statistics.median(whole)
+    rows = [{"stage": stage, "seconds": median[stage], "share": 100.0 * median[stage] / total,
+             "per_simulation": median[stage] / median["simulation"]} for stage in STAGES]
+    rows.append({"stage": "sum of the stages", "seconds": total, "share": 100.0,
+                 "per_simulation": total / median["simulation"]})
+    rows.append({"stage": "whole command", "seconds": command, "share": None,
+                 "per_simulation": command / median["simulation"]})
+    print_table(f"warpsim run {SCENE} -n {n} --frames {FRAMES} --every {EVERY}, default "
+                f"settings, median of {repeats} (wall time)",
+                rows, [("stage", "stage", "s"), ("seconds", "seconds", ".2f"),
+                       ("share [%]", "share", ".0f"), ("x simulation", "per_simulation", ".2f")])
+    finish(out, {"machine": info, "spheres": n, "frames": FRAMES, "every": EVERY,
+                 "repeats": repeats, "stages": samples, "command": whole, "rows": rows},
+           started)
+
+
+if __name__ == "__main__":
+    main()
