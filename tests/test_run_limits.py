@@ -125,7 +125,8 @@ def test_galton_with_events_writes_everything(tmp_path, capsys, motion, precisio
     assert (ev.normal_speed[ev.kind == 0] >= 0).all()
     supports = int(np.count_nonzero(ev.kind == ws.ContactKind.SUPPORT))
     assert supports > 0
-    assert f"{len(ev) - supports:,} bounces, {supports:,} resting or sliding" in out
+    assert f"contacts: {len(ev) - supports:,} bounces (" in out
+    assert f"), {supports:,} resting or sliding (" in out
 
 
 # --- names and limits ----------------------------------------------------------------------
