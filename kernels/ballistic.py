@@ -491,6 +491,29 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                 a = contact
         return a, v, L, energy, rest, bounces, capped, supported, done, st
 
+    @wp.func(inline=False)
+    def held_rest(a: vec3, v: vec3, L: vec3, energy: scalar, rest: scalar, bounces: int,
+                  capped: int, supported: int, r: scalar, m: scalar, physics: Physics,
+                  boxes: Boxes, broad: BroadPhase, frame: int, sphere: int, events: EventBuffer,
+                  box: int, s: scalar, n: vec3):
+        """The rest of a frame from a free leg's contact that may be a support (with ``box``,
+        ``s`` [s] along the leg, normal ``n``): :func:`general_step` until the frame is done,
+        free legs after it included (the same arithmetic as :func:`ballistic_path`'s). Out of
+        line, so the free flight's loop carries no support state.
+
+        Returns:
+            ``(a, v, L, energy, bounces, capped, supported)`` at the frame's end.
+        """
+        st = free_support(physics.gravity)
+        a, v, L, energy, rest, bounces, capped, supported, done, st = general_step(
+            st, a, v, L, energy, rest, bounces, capped, supported, r, m, physics, boxes, broad,
+            frame, sphere, events, box, s, n)
+        while done == 0:
+            a, v, L, energy, rest, bounces, capped, supported, done, st = general_step(
+                st, a, v, L, energy, rest, bounces, capped, supported, r, m, physics, boxes,
+                broad, frame, sphere, events, -1, ZERO, vec3(ZERO, ZERO, ZERO))
+        return a, v, L, energy, bounces, capped, supported
+
     @wp.func(inline=True)
     def ballistic_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
                        physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
@@ -513,53 +536,47 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
             (support starts included), ``capped`` is 1 when the cap stopped the sphere,
             ``supported`` counts the support contacts.
 
-        Free flight and plain bounces run here; supports, and what follows them, in
-        :func:`general_step`.
+        Free flight and plain bounces run here; from the first contact that may be a support
+        on, the frame ends in :func:`held_rest`.
         """
         g = physics.gravity
         dt = physics.dt
         max_bounces = physics.max_bounces
         rest = dt  # time left in the frame [s]
-        st = free_support(g)
         bounces = int(0)
         capped = int(0)
         supported = int(0)
         done = int(0)
         while done == 0:
-            if st.mode == FREE and st.escape_box < 0:
-                box, s, n = nearest_hit_arc(a, v, g, rest, r, boxes, broad)
-                if box < 0:
-                    a = arc_point(a, v, g, rest)
-                    v = v + rest * g
-                    done = 1
-                elif bounces >= max_bounces:
-                    capped = 1  # time left and a contact ahead: stay at the last contact
-                    done = 1
-                else:
-                    u = v + s * g
-                    un = wp.dot(u, n)
-                    if wp.dot(g, n) < -TANGENT_REL * wp.length(g) and -un <= RESTING:
-                        a, v, L, energy, rest, bounces, capped, supported, done, st = (
-                            general_step(st, a, v, L, energy, rest, bounces, capped,
-                                         supported, r, m, physics, boxes, broad, frame, sphere,
-                                         events, box, s, n))
-                    else:  # a bounce
-                        bounces += 1
-                        contact = arc_contact_centre(a, v, g, s, n, boxes.radius[box] + r,
-                                                     boxes.extent[box])
-                        rest = wp.max(rest - s, ZERO)
-                        L = on_contact.spin(L, u, n, r, m, physics)
-                        v = u - TWO * un * n
-                        if wp.static(features.lossy):
-                            energy = on_contact.loss(energy, m, contact, physics)
-                            v = v * on_contact.keep(physics)
-                        on_contact.event(frame, sphere, box, 0, contact, n, (dt - rest) / dt,
-                                         -un, events)
-                        a = contact
+            box, s, n = nearest_hit_arc(a, v, g, rest, r, boxes, broad)
+            if box < 0:
+                a = arc_point(a, v, g, rest)
+                v = v + rest * g
+                done = 1
+            elif bounces >= max_bounces:
+                capped = 1  # time left and a contact ahead: stay at the last contact
+                done = 1
             else:
-                a, v, L, energy, rest, bounces, capped, supported, done, st = general_step(
-                    st, a, v, L, energy, rest, bounces, capped, supported, r, m, physics, boxes,
-                    broad, frame, sphere, events, -1, ZERO, vec3(ZERO, ZERO, ZERO))
+                u = v + s * g
+                un = wp.dot(u, n)
+                if wp.dot(g, n) < -TANGENT_REL * wp.length(g) and -un <= RESTING:
+                    a, v, L, energy, bounces, capped, supported = held_rest(
+                        a, v, L, energy, rest, bounces, capped, supported, r, m, physics,
+                        boxes, broad, frame, sphere, events, box, s, n)
+                    done = 1
+                else:  # a bounce
+                    bounces += 1
+                    contact = arc_contact_centre(a, v, g, s, n, boxes.radius[box] + r,
+                                                 boxes.extent[box])
+                    rest = wp.max(rest - s, ZERO)
+                    L = on_contact.spin(L, u, n, r, m, physics)
+                    v = u - TWO * un * n
+                    if wp.static(features.lossy):
+                        energy = on_contact.loss(energy, m, contact, physics)
+                        v = v * on_contact.keep(physics)
+                    on_contact.event(frame, sphere, box, 0, contact, n, (dt - rest) / dt, -un,
+                                     events)
+                    a = contact
         return a, v, L, energy, bounces, capped, supported
 
     return SimpleNamespace(ballistic_path=ballistic_path)
