@@ -152,8 +152,8 @@ def bounce_kernel(features: Features):
         position_in: wp.array[vec3], velocity_in: wp.array[vec3], radius: wp.array[scalar],
         mass: wp.array[scalar], angular_momentum_in: wp.array[vec3],
         # Out:
-        bounces_out: wp.array[wp.int32], capped_out: wp.array[wp.int32],
-        position_out: wp.array[vec3], velocity_out: wp.array[vec3],
+        bounces_out: wp.array[wp.int32], supports_out: wp.array[wp.int32],
+        capped_out: wp.array[wp.int32], position_out: wp.array[vec3], velocity_out: wp.array[vec3],
         angular_momentum_out: wp.array[vec3], events_out: EventBuffer,
     ):
         i = wp.tid()
@@ -165,7 +165,8 @@ def bounce_kernel(features: Features):
         x, v_new, L, energy, bounces, capped, supported = path(
             a, v, radius[i], m, angular_momentum_in[i], energy, ph, boxes, broad, 0, i,
             events_out)
-        bounces_out[i] = bounces
+        bounces_out[i] = bounces - supported
+        supports_out[i] = supported
         capped_out[i] = capped
         position_out[i] = x
         velocity_out[i] = v_new

@@ -452,3 +452,35 @@ def test_bad_input_names_the_field(device, kwargs, message):
     with pytest.raises(ValueError, match=message):
         ws.bounce(position, velocity, radius, FLOOR, dt, **args, device=device)
 
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+@pytest.mark.parametrize("impact_speed", [0.0, 1.0e-3, 4.0e-3, 0.02, 0.5, 3.0])
+def test_bounces_and_supports_are_counted_apart(precision, impact_speed):
+    """``ws.bounce(motion="ballistic")``: a sphere dropped from rest onto a floor meets it at
+    ``sqrt(2 g h)``; at most ``RESTING_SPEED`` (5 mm/s) of normal speed it is a support (held,
+    counted in ``supports``), above it a bounce (counted in ``bounces``), never both; the frame
+    lasts until the apex of the bounce, so it holds exactly one contact. ``impact_speed = 0``:
+    a sphere starting at rest on the floor."""
+    from warpsim.kernels.ballistic import RESTING_SPEED
+
+    g, r = 9.81, 0.1
+    h = impact_speed ** 2 / (2.0 * g)  # drop height [m] above the floor's contact height
+    t_fall = impact_speed / g
+    dt = max(2.0 * t_fall, 1.0e-3)  # to the apex of the bounce (a resting sphere: 1 ms)
+    floor = ws.RoundedBox(center=(0.0, -0.5, 0.0), half_extents=(5.0, 0.5, 5.0))
+    b = ws.bounce([[0.0, r + h, 0.0]], [[0.0, 0.0, 0.0]], r, floor, dt, motion="ballistic",
+                  gravity=(0.0, -g, 0.0), precision=precision, device="cpu")
+    support = impact_speed <= RESTING_SPEED
+    assert b.hit[0] and not b.capped[0]
+    assert (b.bounces[0], b.supports[0]) == ((0, 1) if support else (1, 0))
+    # the analytic end: at rest on the floor, or at the bounce's apex (back at the start)
+    np.testing.assert_allclose(b.position[0], [0.0, r if support else r + h, 0.0],
+                               atol=5e-5 if precision == "float32" else 1e-12)
+
+
+def test_a_straight_hit_is_a_bounce_not_a_support():
+    """The linear query has no gravity: every contact it takes reflects."""
+    wall = ws.RoundedBox(center=(1.0, 0.0, 0.0), half_extents=(0.1, 1.0, 1.0))
+    b = ws.bounce([[0.0, 0.0, 0.0]], [[1.0, 0.0, 0.0]], 0.1, wall, 1.0, device="cpu")
+    assert (b.hit[0], b.bounces[0], b.supports[0]) == (True, 1, 0)

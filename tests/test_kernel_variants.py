@@ -42,7 +42,7 @@ def state_fields() -> set[str]:
 
 COLLIDE_OUTPUTS = {"box_out", "t_out", "contact_out", "normal_out", "new_position_out",
                    "new_velocity_out"}
-BOUNCE_OUTPUTS = {"bounces_out", "capped_out", "position_out", "velocity_out",
+BOUNCE_OUTPUTS = {"bounces_out", "supports_out", "capped_out", "position_out", "velocity_out",
                   "angular_momentum_out"}
 FRAME_COUNTERS = {"bounce_count_out", "support_count_out", "capped_count_out",
                   "record_position_out",

@@ -145,7 +145,10 @@ class Bounces:
 
     Attributes:
         hit: at least one contact was taken, (N,) bool.
-        bounces: contacts taken, (N,) int32.
+        bounces: contacts taken that reflect the sphere, (N,) int32.
+        supports: contacts taken that hold it instead (resting or sliding: gravity presses
+            it onto the surface and its normal speed is below the resting threshold; a frame
+            holds at most ``max_bounces`` contacts of both kinds together), (N,) int32.
         capped: the ``max_bounces`` cap stopped the sphere at its last contact, (N,) bool.
         position: centre at the end of the frame [m], (N, 3).
         velocity: velocity after the last reflection [m/s], (N, 3).
@@ -154,6 +157,7 @@ class Bounces:
 
     hit: np.ndarray
     bounces: np.ndarray
+    supports: np.ndarray
     capped: np.ndarray
     position: np.ndarray
     velocity: np.ndarray
@@ -222,15 +226,14 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
     state = {"position": to_device(pos, p.vec3, p, dev),
              "velocity": to_device(vel, p.vec3, p, dev),
              "angular_momentum": to_device(mom, p.vec3, p, dev)}
-    out = {"bounces_out": wp.empty(n, dtype=wp.int32, device=dev),
-           "capped_out": wp.empty(n, dtype=wp.int32, device=dev)}
+    out = {name: wp.empty(n, dtype=wp.int32, device=dev)
+           for name in ("bounces_out", "supports_out", "capped_out")}
     for name in ("position_out", "velocity_out", "angular_momentum_out"):
         out[name] = wp.empty(n, dtype=p.vec3, device=dev)
     launch(kernel, n, dev, model=model, spheres=spheres, state_in=state, outputs=out,
            launch_outputs={"events_out": event_buffer(p, dev, 0)})
-    bounces, capped = out["bounces_out"], out["capped_out"]
     outs = [out["position_out"], out["velocity_out"], out["angular_momentum_out"]]
-    b = bounces.numpy()
+    b, s = out["bounces_out"].numpy(), out["supports_out"].numpy()
     x, v, L = (o.numpy() for o in outs)
-    return Bounces(hit=b > 0, bounces=b, capped=capped.numpy() > 0, position=x, velocity=v,
-                   angular_momentum=L)
+    return Bounces(hit=(b + s) > 0, bounces=b, supports=s, capped=out["capped_out"].numpy() > 0,
+                   position=x, velocity=v, angular_momentum=L)
