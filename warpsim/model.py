@@ -146,8 +146,10 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
     if kind is not None and not isinstance(grid, kind):
         raise ValueError(f"broad_phase {broad_phase!r} needs its grid (a {kind.__name__})")
     tree = None
+    # every box's reject bounds, padded and rounded outward to float32 (either precision holds
+    # them): the BVH's leaves, and their union for the frame kernel's free-flight step
+    lower, upper = bvh_bounds(center, extent) if len(boxes) else (None, None)
     if broad_phase in ("bvh", "grid-bvh", "walk-bvh") and len(boxes):
-        lower, upper = bvh_bounds(center, extent)
         # SAH on every device: the best trees for queries, and its builder caps the depth at
         # the query stack's size (a static scene builds it once)
         tree = wp.Bvh(wp.array(lower, dtype=wp.vec3f, device=device),
@@ -160,10 +162,8 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
                                          device=device)
     device_boxes.radius = wp.array(boxes.radius.astype(dtype), dtype=p.scalar, device=device)
     device_boxes.extent = wp.array(extent, dtype=p.vec3, device=device)
-    # the box holding every box's reject bounds, for the frame kernel's free-flight step: the
-    # per-box bounds are padded and rounded outward to float32, which either precision holds
+    # the box holding every box's reject bounds, for the frame kernel's free-flight step
     if len(boxes):
-        lower, upper = bvh_bounds(center, extent)
         device_boxes.lower = p.vec3(*lower.min(axis=0).astype(np.float64))
         device_boxes.upper = p.vec3(*upper.max(axis=0).astype(np.float64))
     else:  # empty: every path lies beyond it

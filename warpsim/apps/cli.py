@@ -425,7 +425,7 @@ def _cmd_run(args) -> int:
     print(f"simulated {stats.frames} frames x {len(swarm)} spheres in {stats.seconds:.2f} s "
           f"(kernel build {build:.2f} s): "
           f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
-    print(bounce_line(stats, traj.events))
+    print(bounce_line(stats))
     print(energy_line(sim, swarm, state))
     print(f"broad phase: {describe_broad_phase(stats.broad_phase, stats.requested_broad_phase)}")
 
@@ -483,9 +483,9 @@ def finish_outputs(outputs, debug: bool) -> int:
     return EXIT_ERROR if failed else 0
 
 
-def bounce_line(stats, events=None) -> str:
+def bounce_line(stats) -> str:
     """The summary's contact line: the bounces and the resting (supporting) contacts, each
-    counted by the kernel; ``events`` is not needed (kept for callers that pass it)."""
+    counted by the kernel."""
     per = stats.bounces / max(stats.sphere_frames, 1)
     per_support = stats.supports / max(stats.sphere_frames, 1)
     return (f"contacts: {stats.bounces:,} bounces ({per:.3f} per sphere-frame), "
