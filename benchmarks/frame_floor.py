@@ -98,9 +98,8 @@ def part_kernels(sim: ws.Simulator) -> dict:
                 if wp.static(kind == "reset"):
                     v = energy_along_gravity(v, energy, m, g, x, physics.origin, 1)
                 if wp.static(kind == "bare"):
-                    if x[1] < FLOOR_AT:
-                        x[1] = FLOOR_AT + (FLOOR_AT - x[1])
-                        v[1] = -v[1]
+                    if x[1] < FLOOR_AT:  # counted, the state untouched (as the lookup's hit)
+                        hits += 1
             position_out[i] = x
             velocity_out[i] = v
             energy_out[i] = scalar(hits)

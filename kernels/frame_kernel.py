@@ -108,52 +108,64 @@ def frame_kernel(features: Features):
     PAD_REL = scalar(BOUNDS_PAD_REL)
 
     @wp.func(inline=True)
-    def clear_of_boxes(a: vec3, d: vec3, grow: vec3, lower: vec3, upper: vec3):
-        """1 when the path from ``a`` [m] along the chord ``d`` [m], its bounds grown by
-        ``grow`` [m] per axis, lies beyond ``lower`` / ``upper`` [m] (``Boxes.lower``,
-        ``Boxes.upper``, plain values: no struct is copied) on some axis: then
-        every box's reject (``candidates.bounds_funcs``' ``apart``) refuses it and the candidate
-        loop would find nothing, whatever the broad phase. The path side is padded by
-        ``BOUNDS_PAD_REL`` of its coordinates (the reject's rounding of the path; the box side
-        is padded on the host), so the answer 1 is never wrong; 0 only means "look".
-        """
+    def beyond_on(a: scalar, d: scalar, grow: scalar, lower: scalar, upper: scalar):
+        """1 when the path from ``a`` [m] along ``d`` [m] on one axis, grown by ``grow`` [m],
+        lies beyond ``[lower, upper]`` [m] on that axis (:func:`clear_of_boxes`' test of one
+        axis)."""
+        e = a + d
+        reach = grow * SLACK + PAD_REL * (wp.abs(a) + wp.abs(d) + grow)
         out = int(0)
-        for i in range(3):
-            e = a[i] + d[i]
-            reach = grow[i] * SLACK + PAD_REL * (wp.abs(a[i]) + wp.abs(d[i]) + grow[i])
-            if wp.max(a[i], e) + reach < lower[i] or wp.min(a[i], e) - reach > upper[i]:
-                out = 1
+        if wp.max(a, e) + reach < lower or wp.min(a, e) - reach > upper:
+            out = 1
         return out
 
     @wp.func(inline=True)
-    def linear_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
-                     physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
-                     events: EventBuffer):
-        """One frame of the linear (chord) model; returns the state and the frame's counts.
-
-        ``v`` is the velocity at the frame's start, and the one at its end comes back; the
-        energy is that of it, which the chord keeps exactly in free flight, so the reset
-        changes nothing there and only removes drift.
+    def clear_of_boxes(a: vec3, d: vec3, grow: vec3, lower: vec3, upper: vec3, first: int):
+        """The first axis (from ``first``, then the others in order; -1: none) on which the
+        path from ``a`` [m] along the chord ``d`` [m], its bounds grown by ``grow`` [m] per
+        axis, lies beyond ``lower`` / ``upper`` [m] (``Boxes.lower``, ``Boxes.upper``, plain
+        values: no struct is copied): then every box's reject (``candidates.bounds_funcs``'
+        ``apart``) refuses it and the candidate loop would find nothing, whatever the broad
+        phase. The path side is padded by ``BOUNDS_PAD_REL`` of its coordinates (the
+        reject's rounding of the path; the box side is padded on the host), so an axis is
+        never wrong; -1 only means "look". Each axis's test is the same arithmetic whatever
+        ``first`` is, so the answer (some axis or none) does not depend on it: a run of free
+        frames starts from the axis that cleared the last one, usually the only one tested.
         """
+        out = int(-1)
+        if first >= 0:
+            if beyond_on(a[first], d[first], grow[first], lower[first], upper[first]) == 1:
+                out = first
+        if out < 0:
+            for i in range(3):
+                if out < 0 and i != first:
+                    if beyond_on(a[i], d[i], grow[i], lower[i], upper[i]) == 1:
+                        out = i
+        return out
+
+    @wp.func(inline=True)
+    def linear_clear(x: vec3, v: vec3, r: scalar, physics: Physics, boxes: Boxes, first: int):
+        """The axis (-1: none) on which the linear frame's chord from ``x`` [m] with the
+        velocity ``v`` [m/s] at the frame's start lies beyond every box's bounds
+        (:func:`clear_of_boxes`, from axis ``first``)."""
+        d = (v + physics.gravity * (HALF * physics.dt)) * physics.dt
+        return clear_of_boxes(x, d, vec3(r, r, r), boxes.lower, boxes.upper, first)
+
+    @wp.func(inline=True)
+    def linear_free(x: vec3, v: vec3, physics: Physics):
+        """The linear frame without contact: the chord ``(v + g dt / 2) dt`` and the velocity
+        at its end, ``v + g dt`` (``bounce.bounce_path``'s no-contact arithmetic)."""
+        half_kick = physics.gravity * (HALF * physics.dt)
+        w = v + half_kick
+        return x + w * physics.dt, w + half_kick
+
+    @wp.func(inline=True)
+    def linear_settle(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar,
+                      m: scalar, physics: Physics, supports: int):
+        """The linear frame after its move: the energy reset (a frame with ``supports``
+        resting contacts keeps the lower of the two energies) and the orientation."""
         gravity = physics.gravity
         origin = physics.origin
-        bounces = int(0)
-        capped = int(0)
-        supports = int(0)
-        # free flight when the frame's chord meets no box's bounds: the bounce loop's own
-        # arithmetic for a frame without contact (``bounce.bounce_path``), without its call
-        half_kick = gravity * (HALF * physics.dt)
-        w = v + half_kick
-        d = w * physics.dt
-        clear = int(0)
-        if wp.static(free_flight):
-            clear = clear_of_boxes(x, d, vec3(r, r, r), boxes.lower, boxes.upper)
-        if clear == 1:
-            x = x + d
-            v = w + half_kick
-        else:
-            x, v, L, energy, bounces, capped, supports = path(x, v, r, m, L, energy, physics,
-                                                              boxes, broad, frame, sphere, events)
         if supports > 0:
             # a resting contact is inelastic: keep the state and take its energy when that is
             # lower by more than rounding; never more: a state above E (rounding on a long
@@ -177,7 +189,68 @@ def frame_kernel(features: Features):
         if wp.static(spin):
             rot = rotation_vector(L, inertia(m, r), physics.max_rot)
             o = integrate_orientation(o, rot, physics.dt)
+        return v, o, energy
+
+    @wp.func(inline=True)
+    def linear_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
+                     physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
+                     events: EventBuffer):
+        """One frame of the linear (chord) model; returns the state and the frame's counts.
+
+        ``v`` is the velocity at the frame's start, and the one at its end comes back; the
+        energy is that of it, which the chord keeps exactly in free flight, so the reset
+        changes nothing there and only removes drift.
+        """
+        bounces = int(0)
+        capped = int(0)
+        supports = int(0)
+        # free flight when the frame's chord meets no box's bounds: the bounce loop's own
+        # arithmetic for a frame without contact (``bounce.bounce_path``), without its call
+        clear = int(-1)
+        if wp.static(free_flight):
+            clear = linear_clear(x, v, r, physics, boxes, -1)
+        if clear >= 0:
+            x, v = linear_free(x, v, physics)
+        else:
+            x, v, L, energy, bounces, capped, supports = path(x, v, r, m, L, energy, physics,
+                                                              boxes, broad, frame, sphere, events)
+        v, o, energy = linear_settle(x, v, L, o, energy, r, m, physics, supports)
         return x, v, L, o, energy, bounces, capped, supports
+
+    @wp.func(inline=True)
+    def ballistic_clear(x: vec3, v: vec3, r: scalar, physics: Physics, boxes: Boxes,
+                        first: int):
+        """The axis (-1: none) on which the ballistic frame's arc from ``x`` [m] with the
+        velocity ``v`` [m/s] lies beyond every box's bounds: its chord's bounds grown by the
+        sagitta ``|g| dt^2 / 8`` and the radius (as ``nearest_arc.arc_path``;
+        :func:`clear_of_boxes`, from axis ``first``)."""
+        gravity = physics.gravity
+        dt = physics.dt
+        k = EIGHTH * dt * dt
+        sag = vec3(wp.abs(gravity[0]) * k + r, wp.abs(gravity[1]) * k + r,
+                   wp.abs(gravity[2]) * k + r)
+        return clear_of_boxes(x, dt * (v + (HALF * dt) * gravity), sag, boxes.lower,
+                              boxes.upper, first)
+
+    @wp.func(inline=True)
+    def ballistic_free(x: vec3, v: vec3, physics: Physics):
+        """The ballistic frame without contact: the parabola's point and velocity at ``dt``
+        (``ballistic.ballistic_path``'s no-contact arithmetic)."""
+        return arc_point(x, v, physics.gravity, physics.dt), v + physics.dt * physics.gravity
+
+    @wp.func(inline=True)
+    def ballistic_settle(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar,
+                         m: scalar, physics: Physics, supports: int):
+        """The ballistic frame after its move: the speed against the energy bound (raised
+        back only with the correction) and the orientation."""
+        if wp.static(energy_correction):
+            v = energy_along_gravity(v, energy, m, physics.gravity, x, physics.origin, 1)
+        else:
+            v = energy_along_gravity(v, energy, m, physics.gravity, x, physics.origin, 0)
+        if wp.static(spin):
+            rot = rotation_vector(L, inertia(m, r), physics.max_rot)
+            o = integrate_orientation(o, rot, physics.dt)
+        return v, o, energy
 
     @wp.func(inline=True)
     def ballistic_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar,
@@ -189,37 +262,55 @@ def frame_kernel(features: Features):
         lowered to the energy bound (float error is never turned into a gain); with it, the
         rounding drift is put back through the component along gravity.
         """
-        gravity = physics.gravity
-        origin = physics.origin
-        dt = physics.dt
         bounces = int(0)
         capped = int(0)
         supports = int(0)
-        # free flight when the frame's arc meets no box's bounds (its chord's, grown by the
-        # sagitta, as ``nearest_arc.arc_path``): the ballistic loop's step without contact
-        k = EIGHTH * dt * dt
-        sag = vec3(wp.abs(gravity[0]) * k + r, wp.abs(gravity[1]) * k + r,
-                   wp.abs(gravity[2]) * k + r)
-        clear = int(0)
+        # free flight when the frame's arc meets no box's bounds: the ballistic loop's step
+        # without contact
+        clear = int(-1)
         if wp.static(free_flight):
-            clear = clear_of_boxes(x, dt * (v + (HALF * dt) * gravity), sag, boxes.lower,
-                                   boxes.upper)
-        if clear == 1:
-            x = arc_point(x, v, gravity, dt)
-            v = v + dt * gravity
+            clear = ballistic_clear(x, v, r, physics, boxes, -1)
+        if clear >= 0:
+            x, v = ballistic_free(x, v, physics)
         else:
             x, v, L, energy, bounces, capped, supports = path(x, v, r, m, L, energy, physics,
                                                               boxes, broad, frame, sphere, events)
-        if wp.static(energy_correction):
-            v = energy_along_gravity(v, energy, m, gravity, x, origin, 1)
-        else:
-            v = energy_along_gravity(v, energy, m, gravity, x, origin, 0)
-        if wp.static(spin):
-            rot = rotation_vector(L, inertia(m, r), physics.max_rot)
-            o = integrate_orientation(o, rot, physics.dt)
+        v, o, energy = ballistic_settle(x, v, L, o, energy, r, m, physics, supports)
         return x, v, L, o, energy, bounces, capped, supports
 
-    one_frame = ballistic_frame if motion == "ballistic" else linear_frame
+    if motion == "ballistic":
+        one_frame, frame_clear, free_move, settle = (ballistic_frame, ballistic_clear,
+                                                     ballistic_free, ballistic_settle)
+    else:
+        one_frame, frame_clear, free_move, settle = (linear_frame, linear_clear, linear_free,
+                                                     linear_settle)
+
+    @wp.func(inline=True)
+    def record_frame(f: int, frame_count: int, record_every: int, row: int, i: int,
+                     with_motion: bool, x: vec3, v: vec3, L: vec3, o: quat, r: scalar,
+                     m: scalar, physics: Physics, orientation_in: wp.array[quat],
+                     record_position_out: wp.array2d[vec3],
+                     record_orientation_out: wp.array2d[quat],
+                     record_velocity_out: wp.array2d[vec3],
+                     record_angular_velocity_out: wp.array2d[vec3]):
+        """Sphere ``i``'s record of the launch's frame ``f`` (from 0) into row ``row`` when it
+        is one in ``record_every`` or the launch's last; returns the next row."""
+        if record_every > 0:
+            if (f + 1) % record_every == 0 or f + 1 == frame_count:
+                record_position_out[row, i] = x
+                if wp.static(spin):
+                    record_orientation_out[row, i] = o
+                else:
+                    record_orientation_out[row, i] = orientation_in[i]
+                if with_motion:
+                    record_velocity_out[row, i] = v
+                    if wp.static(spin):
+                        record_angular_velocity_out[row, i] = rotation_vector(
+                            L, inertia(m, r), physics.max_rot)
+                    else:
+                        record_angular_velocity_out[row, i] = vec3()
+                row += 1
+        return row
 
     @variant_kernel
     def advance_frames(
@@ -275,36 +366,65 @@ def frame_kernel(features: Features):
         born = int(0)
         if wp.static(births):
             born = birth_frame[i] - first_frame  # frames of this launch before its birth
-        for f in range(frame_count):
-            if wp.static(births):
-                if f >= born:
+        if wp.static(free_flight):
+            # a frame beyond every box's bounds takes the free step; a run of them goes on in
+            # a loop of its own, with no call of the bounce loop in it (the same steps, bits)
+            f = int(0)
+            while f < frame_count:
+                live = int(1)
+                if wp.static(births):
+                    if f < born:
+                        live = 0
+                free = int(-1)
+                if live == 1:
+                    free = frame_clear(x, v, r, physics, boxes, -1)
+                if free >= 0:
+                    while free >= 0:
+                        x, v = free_move(x, v, physics)
+                        v, o, energy = settle(x, v, L, o, energy, r, m, physics, 0)
+                        row = record_frame(f, frame_count, record_every, row, i, with_motion,
+                                           x, v, L, o, r, m, physics, orientation_in,
+                                           record_position_out, record_orientation_out,
+                                           record_velocity_out, record_angular_velocity_out)
+                        f += 1
+                        if f < frame_count:
+                            free = frame_clear(x, v, r, physics, boxes, free)
+                        else:
+                            free = -1
+                else:
+                    if live == 1:
+                        x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m,
+                                                                physics, boxes, broad, f + 1,
+                                                                sphere, events_out)
+                        bounces += b - s
+                        supports += s
+                        capped += c
+                    row = record_frame(f, frame_count, record_every, row, i, with_motion, x, v,
+                                       L, o, r, m, physics, orientation_in, record_position_out,
+                                       record_orientation_out, record_velocity_out,
+                                       record_angular_velocity_out)
+                    f += 1
+        else:
+            for f in range(frame_count):
+                if wp.static(births):
+                    if f >= born:
+                        x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m,
+                                                                physics, boxes, broad, f + 1,
+                                                                sphere, events_out)
+                        bounces += b - s
+                        supports += s
+                        capped += c
+                else:
                     x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m, physics,
                                                             boxes, broad, f + 1, sphere,
                                                             events_out)
                     bounces += b - s
                     supports += s
                     capped += c
-            else:
-                x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m, physics,
-                                                        boxes, broad, f + 1, sphere, events_out)
-                bounces += b - s
-                supports += s
-                capped += c
-            if record_every > 0:
-                if (f + 1) % record_every == 0 or f + 1 == frame_count:
-                    record_position_out[row, i] = x
-                    if wp.static(spin):
-                        record_orientation_out[row, i] = o
-                    else:
-                        record_orientation_out[row, i] = orientation_in[i]
-                    if with_motion:
-                        record_velocity_out[row, i] = v
-                        if wp.static(spin):
-                            record_angular_velocity_out[row, i] = rotation_vector(
-                                L, inertia(m, r), physics.max_rot)
-                        else:
-                            record_angular_velocity_out[row, i] = vec3()
-                    row += 1
+                row = record_frame(f, frame_count, record_every, row, i, with_motion, x, v, L,
+                                   o, r, m, physics, orientation_in, record_position_out,
+                                   record_orientation_out, record_velocity_out,
+                                   record_angular_velocity_out)
         position_out[i] = x
         velocity_out[i] = v
         energy_out[i] = energy

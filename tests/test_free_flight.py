@@ -69,3 +69,32 @@ def test_free_flight_step_is_the_bounce_loops_bits(precision, motion, scene_name
 def test_a_closed_room_runs_without_the_step():
     scene = ws.Scene.load("room")
     assert not ws.Simulator(scene, scene.spawn(n=50, seed=1), device="cpu")._features.free_flight
+
+
+@pytest.mark.parametrize("motion", ["linear", "ballistic"])
+@pytest.mark.parametrize("births", [False, True])
+def test_recorded_frames_of_free_runs_are_the_bounce_loops_bits(precision, motion, births):
+    """Runs of free frames go on in a loop of their own: the frames it records (positions,
+    orientations, velocities, every 3rd frame and the last), the events and the counts are
+    those of the kernel without the step, for spheres that leave the boxes' bounds, come back
+    and spin (friction), some born late."""
+    rng = np.random.default_rng(9)
+    n = 120
+    scene = ws.Scene(far_boxes(), friction=0.5, energy_retention=0.9)
+    birth = rng.integers(0, 40, n) if births else 0
+    swarm = ws.Swarm(rng.uniform([-3, 0.2, -1], [3, 4, 1], (n, 3)), rng.uniform(-6, 6, (n, 3)),
+                     radius=0.1, birth_frame=birth)
+    sims = [ws.Simulator(scene, swarm, precision=precision, motion=motion, device="cpu")
+            for _ in range(2)]
+    assert sims[0]._features.free_flight
+    with_step(sims[0], True)
+    with_step(sims[1], False)
+    runs = [sim.run(100, every=3, velocities=True, events=True) for sim in sims]
+    for name in ("position", "orientation", "velocity", "angular_velocity"):
+        np.testing.assert_array_equal(getattr(runs[0], name), getattr(runs[1], name), name)
+    a, b = runs[0].events, runs[1].events
+    assert len(a) == len(b) > 0
+    np.testing.assert_array_equal(a.position, b.position)
+    assert state_bytes(sims[0]) == state_bytes(sims[1])
+    assert (sims[0].stats.bounces, sims[0].stats.supports) == (sims[1].stats.bounces,
+                                                               sims[1].stats.supports)
