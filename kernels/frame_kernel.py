@@ -192,32 +192,6 @@ def frame_kernel(features: Features):
         return v, o, energy
 
     @wp.func(inline=True)
-    def linear_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
-                     physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
-                     events: EventBuffer):
-        """One frame of the linear (chord) model; returns the state and the frame's counts.
-
-        ``v`` is the velocity at the frame's start, and the one at its end comes back; the
-        energy is that of it, which the chord keeps exactly in free flight, so the reset
-        changes nothing there and only removes drift.
-        """
-        bounces = int(0)
-        capped = int(0)
-        supports = int(0)
-        # free flight when the frame's chord meets no box's bounds: the bounce loop's own
-        # arithmetic for a frame without contact (``bounce.bounce_path``), without its call
-        clear = int(-1)
-        if wp.static(free_flight):
-            clear = linear_clear(x, v, r, physics, boxes, -1)
-        if clear >= 0:
-            x, v = linear_free(x, v, physics)
-        else:
-            x, v, L, energy, bounces, capped, supports = path(x, v, r, m, L, energy, physics,
-                                                              boxes, broad, frame, sphere, events)
-        v, o, energy = linear_settle(x, v, L, o, energy, r, m, physics, supports)
-        return x, v, L, o, energy, bounces, capped, supports
-
-    @wp.func(inline=True)
     def ballistic_clear(x: vec3, v: vec3, r: scalar, physics: Physics, boxes: Boxes,
                         first: int):
         """The axis (-1: none) on which the ballistic frame's arc from ``x`` [m] with the
@@ -252,38 +226,54 @@ def frame_kernel(features: Features):
             o = integrate_orientation(o, rot, physics.dt)
         return v, o, energy
 
-    @wp.func(inline=True)
-    def ballistic_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar,
-                        m: scalar, physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
-                        sphere: int, events: EventBuffer):
-        """One frame of the ballistic model (``v`` is the true velocity, before and after).
+    if motion == "ballistic":
+        frame_clear, free_move, settle = ballistic_clear, ballistic_free, ballistic_settle
+    else:
+        frame_clear, free_move, settle = linear_clear, linear_free, linear_settle
 
-        The motion keeps the energy itself, so without the correction the speed is only ever
-        lowered to the energy bound (float error is never turned into a gain); with it, the
-        rounding drift is put back through the component along gravity.
+    @wp.func(inline=True)
+    def one_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
+                  physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
+                  events: EventBuffer):
+        """One frame of the motion model compiled in; returns the state and the frame's
+        counts. ``v`` is the velocity at the frame's start, and the one at its end comes back.
+
+        Free flight when the frame's path meets no box's bounds (:func:`linear_clear`,
+        :func:`ballistic_clear`): the loop's own arithmetic for a frame without contact, without
+        its call. Then the settling: the linear model's chord keeps the energy exactly in free
+        flight, so its reset changes nothing there and only removes drift; the ballistic motion
+        keeps the energy itself, so without the correction its speed is only ever lowered to
+        the energy bound (float error is never turned into a gain), with it the rounding drift
+        is put back through the component along gravity.
         """
         bounces = int(0)
         capped = int(0)
         supports = int(0)
-        # free flight when the frame's arc meets no box's bounds: the ballistic loop's step
-        # without contact
         clear = int(-1)
         if wp.static(free_flight):
-            clear = ballistic_clear(x, v, r, physics, boxes, -1)
+            clear = frame_clear(x, v, r, physics, boxes, -1)
         if clear >= 0:
-            x, v = ballistic_free(x, v, physics)
+            x, v = free_move(x, v, physics)
         else:
             x, v, L, energy, bounces, capped, supports = path(x, v, r, m, L, energy, physics,
                                                               boxes, broad, frame, sphere, events)
-        v, o, energy = ballistic_settle(x, v, L, o, energy, r, m, physics, supports)
+        v, o, energy = settle(x, v, L, o, energy, r, m, physics, supports)
         return x, v, L, o, energy, bounces, capped, supports
 
-    if motion == "ballistic":
-        one_frame, frame_clear, free_move, settle = (ballistic_frame, ballistic_clear,
-                                                     ballistic_free, ballistic_settle)
-    else:
-        one_frame, frame_clear, free_move, settle = (linear_frame, linear_clear, linear_free,
-                                                     linear_settle)
+    @wp.func(inline=True)
+    def counted_frame(live: int, x: vec3, v: vec3, L: vec3, o: quat, energy: scalar,
+                      r: scalar, m: scalar, physics: Physics, boxes: Boxes, broad: BroadPhase,
+                      frame: int, sphere: int, events: EventBuffer, bounces: int, supports: int,
+                      capped: int):
+        """:func:`one_frame` for a sphere that exists (``live`` 1; 0: the state stays), its
+        counts added to the launch's (bounces that reflect, supports, capped frames)."""
+        if live == 1:
+            x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m, physics, boxes,
+                                                    broad, frame, sphere, events)
+            bounces += b - s
+            supports += s
+            capped += c
+        return x, v, L, o, energy, bounces, supports, capped
 
     @wp.func(inline=True)
     def record_frame(f: int, frame_count: int, record_every: int, row: int, i: int,
@@ -392,13 +382,9 @@ def frame_kernel(features: Features):
                         else:
                             free = -1
                 else:
-                    if live == 1:
-                        x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m,
-                                                                physics, boxes, broad, f + 1,
-                                                                sphere, events_out)
-                        bounces += b - s
-                        supports += s
-                        capped += c
+                    x, v, L, o, energy, bounces, supports, capped = counted_frame(
+                        live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1, sphere,
+                        events_out, bounces, supports, capped)
                     row = record_frame(f, frame_count, record_every, row, i, with_motion, x, v,
                                        L, o, r, m, physics, orientation_in, record_position_out,
                                        record_orientation_out, record_velocity_out,
@@ -406,21 +392,13 @@ def frame_kernel(features: Features):
                     f += 1
         else:
             for f in range(frame_count):
+                live = int(1)
                 if wp.static(births):
-                    if f >= born:
-                        x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m,
-                                                                physics, boxes, broad, f + 1,
-                                                                sphere, events_out)
-                        bounces += b - s
-                        supports += s
-                        capped += c
-                else:
-                    x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m, physics,
-                                                            boxes, broad, f + 1, sphere,
-                                                            events_out)
-                    bounces += b - s
-                    supports += s
-                    capped += c
+                    if f < born:
+                        live = 0
+                x, v, L, o, energy, bounces, supports, capped = counted_frame(
+                    live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1, sphere,
+                    events_out, bounces, supports, capped)
                 row = record_frame(f, frame_count, record_every, row, i, with_motion, x, v, L,
                                    o, r, m, physics, orientation_in, record_position_out,
                                    record_orientation_out, record_velocity_out,
