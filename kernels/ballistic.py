@@ -40,6 +40,7 @@ import warp as wp
 from .arc import arc_funcs
 from .contact import contact_funcs
 from .data import Features, model_structs
+from .nearest import SEPARATION_ULPS
 from .nearest_arc import model_nearest_hit_arc, nearest_arc_funcs
 from .precision import precision
 from .slide import LEG_DETACH, LEG_END, LEG_REGION, SHARP_SLIDE_ULPS, slide_funcs
@@ -92,6 +93,8 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
     ONE = scalar(1.0)
     TWO = scalar(2.0)
     RESTING = scalar(RESTING_SPEED)
+    SEPARATION = scalar(SEPARATION_ULPS * p.eps)
+    EIGHT = scalar(8.0)
     COPLANAR = scalar(1.0 - COPLANAR_REL)
     TANGENT_REL = scalar(p.tangent_rel)
     SHARP_SLIDE = scalar(SHARP_SLIDE_ULPS * p.eps)
@@ -119,6 +122,33 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         if n[axis] < ZERO:
             side = -ONE
         return axis, side
+
+    @wp.func
+    def inf_norm(x: vec3):
+        return wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2]))
+
+    @wp.func
+    def resting(g: vec3, n: vec3, un: scalar, a: vec3, leg: vec3, big_r: scalar,
+                extent: vec3):
+        """Whether a contact (unit normal ``n``, normal speed ``un`` [m/s], from the leg that
+        started at ``a`` [m] and moved by ``leg`` [m], Minkowski radius ``big_r`` [m], box
+        half extent ``extent`` [m]) is a support: gravity presses the sphere onto the surface
+        and its normal speed is at most ``RESTING_SPEED``, or, where the contact centre is
+        moved out by the separation lift (``nearest.separate``: a Minkowski radius below
+        ``SEPARATION_ULPS`` ulps of the scale), at most the speed of a fall from four times
+        that lift, ``sqrt(8 |g . n| lift)``: a sphere resting on a sharp face (a point on a
+        plate) starts each frame one or two lifts above it, and its fall is no bounce (as a
+        bounce each would add a lift of height: a ratchet)."""
+        gn = wp.dot(g, n)
+        out = int(0)
+        if gn < -TANGENT_REL * wp.length(g):
+            limit = RESTING
+            lift = SEPARATION * wp.max(wp.max(inf_norm(a), inf_norm(leg)), inf_norm(extent))
+            if big_r < TWO * lift:
+                limit = wp.max(limit, wp.sqrt(EIGHT * -gn * lift))
+            if -un <= limit:
+                out = 1
+        return out
 
     @wp.func(inline=False)
     def holds_on(x: vec3, v: vec3, g: vec3, h: vec3, big_r: scalar, mask: vec3, sig: vec3):
@@ -462,7 +492,8 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                 held = int(0)
                 graze = int(0)
                 # a support: gravity presses and the normal speed is at most RESTING_SPEED
-                if wp.dot(g, n) < -TANGENT_REL * wp.length(g) and -un <= RESTING:
+                if resting(g, n, un, a, contact - a, boxes.radius[box] + r,
+                           boxes.extent[box]) == 1:
                     held, graze, st, u_s = support_contact(st, u, n, un, contact, box,
                                                            rest, r, g, boxes)
                     if held == 1:
@@ -559,7 +590,8 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
             else:
                 u = v + s * g
                 un = wp.dot(u, n)
-                if wp.dot(g, n) < -TANGENT_REL * wp.length(g) and -un <= RESTING:
+                if resting(g, n, un, a, arc_point(a, v, g, s) - a, boxes.radius[box] + r,
+                           boxes.extent[box]) == 1:
                     a, v, L, energy, bounces, capped, supported = held_rest(
                         a, v, L, energy, rest, bounces, capped, supported, r, m, physics,
                         boxes, broad, frame, sphere, events, box, s, n)

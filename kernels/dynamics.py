@@ -139,6 +139,28 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
         return out
 
     @wp.func
+    def energy_along_velocity(u: vec3, energy: scalar, m: scalar, g: vec3, position: vec3,
+                              origin: vec3, raise_ok: int):
+        """``u`` with its kinetic energy set to ``E - Ep`` by scaling its speed, its direction
+        kept: for a sphere that may be sliding on a support, whose velocity must stay along
+        the surface (a change of the part along gravity would lift it off a tilted face).
+        ``E - Ep <= 0`` gives ``u = 0``; a mismatch within the rounding of the energies
+        (``RESET_ULPS``) leaves ``u`` bit for bit; ``raise_ok`` as in
+        :func:`energy_along_gravity`.
+        """
+        ep = potential(m, g, position, origin)
+        kinetic = energy - ep
+        have = HALF * m * wp.dot(u, u)
+        out = u
+        slack = RESET_SLACK * (wp.abs(energy) + wp.abs(ep))
+        if wp.abs(kinetic - have) > slack and (raise_ok == 1 or kinetic < have):
+            if kinetic <= ZERO:
+                out = vec3(ZERO, ZERO, ZERO)
+            elif have > ZERO:
+                out = u * wp.sqrt(kinetic / have)
+        return out
+
+    @wp.func
     def kinetic_energy(m: scalar, v: vec3):
         return HALF * m * wp.dot(v, v)
 
@@ -154,5 +176,6 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
     return SimpleNamespace(inertia=inertia, clamp_momentum=clamp_momentum,
                            rotation_vector=rotation_vector, friction_spin=friction_spin,
                            potential=potential, energy_along_gravity=energy_along_gravity,
+                           energy_along_velocity=energy_along_velocity,
                            kinetic_energy=kinetic_energy,
                            integrate_orientation=integrate_orientation)

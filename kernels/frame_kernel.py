@@ -94,6 +94,7 @@ def frame_kernel(features: Features):
         path = bounce_funcs(features).bounce_path
     dyn = dynamics_funcs(p)
     energy_along_gravity = dyn.energy_along_gravity
+    energy_along_velocity = dyn.energy_along_velocity
     kinetic_energy = dyn.kinetic_energy
     potential = dyn.potential
     rotation_vector = dyn.rotation_vector
@@ -216,11 +217,18 @@ def frame_kernel(features: Features):
     def ballistic_settle(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar,
                          m: scalar, physics: Physics, supports: int):
         """The ballistic frame after its move: the speed against the energy bound (raised
-        back only with the correction) and the orientation."""
+        back only with the correction) and the orientation. After a frame with supports
+        (the sphere may be sliding) the speed is scaled, its direction kept along the
+        surface; otherwise only the part along gravity changes (the sideways speed kept)."""
+        raise_ok = int(0)
         if wp.static(energy_correction):
-            v = energy_along_gravity(v, energy, m, physics.gravity, x, physics.origin, 1)
+            raise_ok = 1
+        if supports > 0:
+            v = energy_along_velocity(v, energy, m, physics.gravity, x, physics.origin,
+                                      raise_ok)
         else:
-            v = energy_along_gravity(v, energy, m, physics.gravity, x, physics.origin, 0)
+            v = energy_along_gravity(v, energy, m, physics.gravity, x, physics.origin,
+                                     raise_ok)
         if wp.static(spin):
             rot = rotation_vector(L, inertia(m, r), physics.max_rot)
             o = integrate_orientation(o, rot, physics.dt)
