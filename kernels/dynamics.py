@@ -33,6 +33,7 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
     """
     scalar, vec3, quat = p.scalar, p.vec3, p.quat
     ZERO = scalar(0.0)
+    ONE = scalar(1.0)
     HALF = scalar(0.5)
     TWO = scalar(2.0)
     INERTIA = scalar(SOLID_SPHERE_INERTIA)
@@ -88,6 +89,21 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
         """Gravitational potential energy ``-m g . (p - origin)`` [J]."""
         return -m * wp.dot(g, position - origin)
 
+    @wp.func(inline=True)
+    def energy_mismatch(u: vec3, energy: scalar, m: scalar, g: vec3, position: vec3,
+                        origin: vec3, raise_ok: int):
+        """``(E - Ep, 1/2 m |u|^2, slack, change)``: the kinetic energy the state should have,
+        the one it has, the energies' rounding (``RESET_ULPS``) [J], and 1 when the two differ
+        by more than that and the velocity is to change (``raise_ok`` 1, or it is too high)."""
+        ep = potential(m, g, position, origin)
+        kinetic = energy - ep
+        have = HALF * m * wp.dot(u, u)
+        slack = RESET_SLACK * (wp.abs(energy) + wp.abs(ep))
+        change = int(0)
+        if wp.abs(kinetic - have) > slack and (raise_ok == 1 or kinetic < have):
+            change = 1
+        return kinetic, have, slack, change
+
     @wp.func
     def energy_along_gravity(u: vec3, energy: scalar, m: scalar, g: vec3, position: vec3,
                              origin: vec3, raise_ok: int):
@@ -109,12 +125,10 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
             kinetic energy when it is below ``E - Ep`` (the reset), 0 to only ever lower it
             (no energy gain, nothing put back).
         """
-        ep = potential(m, g, position, origin)
-        kinetic = energy - ep
-        have = HALF * m * wp.dot(u, u)
+        kinetic, have, slack, change = energy_mismatch(u, energy, m, g, position, origin,
+                                                       raise_ok)
         out = u
-        slack = RESET_SLACK * (wp.abs(energy) + wp.abs(ep))
-        if wp.abs(kinetic - have) > slack and (raise_ok == 1 or kinetic < have):
+        if change == 1:
             if kinetic <= ZERO:
                 out = vec3(ZERO, ZERO, ZERO)
             else:
@@ -148,17 +162,14 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
         (``RESET_ULPS``) leaves ``u`` bit for bit; ``raise_ok`` as in
         :func:`energy_along_gravity`.
         """
-        ep = potential(m, g, position, origin)
-        kinetic = energy - ep
-        have = HALF * m * wp.dot(u, u)
-        out = u
-        slack = RESET_SLACK * (wp.abs(energy) + wp.abs(ep))
-        if wp.abs(kinetic - have) > slack and (raise_ok == 1 or kinetic < have):
-            if kinetic <= ZERO:
-                out = vec3(ZERO, ZERO, ZERO)
-            elif have > ZERO:
-                out = u * wp.sqrt(kinetic / have)
-        return out
+        kinetic, have, _slack, change = energy_mismatch(u, energy, m, g, position, origin,
+                                                        raise_ok)
+        scale = ONE
+        if change == 1:
+            scale = ZERO  # no energy left for motion (or no speed to scale)
+            if kinetic > ZERO and have > ZERO:
+                scale = wp.sqrt(kinetic / have)
+        return u * scale
 
     @wp.func
     def kinetic_energy(m: scalar, v: vec3):
