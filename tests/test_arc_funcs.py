@@ -126,11 +126,17 @@ def named_arcs():
                                    1, np.sqrt(0.5), [0, 1, 0]),
         "drop, tau too short": ([0.25, 3.0, 0.125], [0, 0, 0], [0, -8, 0], 0.5, H, RB,
                                 0, None, None),
+        # g = -16: 2 = 8 s^2 at s = 1/2, the end of the span (a contact at tau counts)
+        "drop, lands exactly at tau": ([0.25, 3.0, 0.125], [0, 0, 0], [0, -16, 0], 0.5, H, RB,
+                                       1, 0.5, [0, 1, 0]),
         "drop onto a sharp box": ([0.25, 2.0, 0.125], [0, 0, 0], [0, -8, 0], 1.0, H, 0.0,
                                   1, np.sqrt(1.5 / 4.0), [0, 1, 0]),
         # thrown sideways onto the -x face plane x = -1.5 of a sharp box (grown box = core)
         "sharp box, -x face": ([-3.5, 0.25, 0.0], [4, 0.5, 0], [0, -2, 0], 1.0, [1.5, 0.5, 0.25],
                                0.0, 1, 0.5, [-1, 0, 0]),
+        # a sharp box is closed: sliding along its top plane y = 0.5 into the -x face plane
+        "sharp box, along its top plane into -x": ([-3.5, 0.5, 0.0], [4, 0, 0], [0, 0, -1], 1.0,
+                                                   [1.5, 0.5, 0.25], 0.0, 1, 0.5, [-1, 0, 0]),
         # rising under the bottom plane y = -1: apex exactly on it (tangent), 2^-8 m above
         # it (a hit before the apex, at y(s) = -1: s = (1 - sqrt(dip)) / 2), or 2^-8 short
         "apex exactly on the bottom face": ([0.25, -2.0, 0.0], [0.5, 4, 0], [0, -8, 0], 1.0,
@@ -285,6 +291,12 @@ ENTRIES = {
                              (1, 0.5, 0)),
     "straight, too short": ([-3, 0, 0], [4, 0, 0], [0, 0, 0], 0.25, [1, 1, 1], 0.0, (0, 0, 0),
                             (0, None, None)),
+    # x = 3 - 4 s reaches +1 at s = 0.5
+    "straight, through +x": ([3, 0, 0], [-4, 0, 0], [0, 0, 0], 1.0, [1, 1, 1], 0.0, (0, 0, 0),
+                             (1, 0.5, 0)),
+    # y = 3 - 8 s^2 reaches 1 at s = 1/2 = tau
+    "drop, entry exactly at tau": ([0, 3, 0], [0, 0, 0], [0, -16, 0], 0.5, [1, 1, 1], 0.0,
+                                   (0, 0, 0), (1, 0.5, 1)),
     # y = 3 - 4 s^2 reaches 1 at sqrt(0.5)
     "drop through +y": ([0, 3, 0], [0, 0, 0], [0, -8, 0], 1.0, [1, 1, 1], 0.0, (0, 0, 0),
                         (1, np.sqrt(0.5), 1)),
