@@ -35,9 +35,12 @@ CACHE = Path(".mutmut-cache")
 PYTEST = "python -m pytest -x -q -p no:cacheprovider "
 
 #: The fast test subset per kernel file: tests that build only small kernels that contain the
-#: file's funcs (a cold Warp build per mutant dominates the time). The capsule and rounded-box
-#: subsets run in float64 only (``-k float64``: one build per kernel instead of two; the funcs
-#: are the same source in both precisions, and float64's tolerances are the tighter).
+#: file's funcs (a cold Warp build per mutant dominates the time). The subsets run in float64
+#: only (``-k float64``: one build per kernel instead of two; the funcs are the same source in
+#: both precisions, and float64's tolerances are the tighter). The arc's subset calls its funcs
+#: through one test kernel (``tests/test_arc_funcs.py``, and ``tests/test_arc_walk.py`` with the
+#: same kernel; about 12 s a mutant) instead of the collide kernels that
+#: ``test_arc_face_after_edge.py`` and ``test_arc_sweep.py`` build.
 SUBSETS = {
     "kernels/capsule.py": "tests/test_func_contracts.py::test_segment_sphere_and_capsule "
                           "tests/test_func_contracts.py::test_far_passes_agree_with_the_exact_root "
@@ -45,7 +48,7 @@ SUBSETS = {
     "kernels/slab.py": "tests/test_func_contracts.py "
                        "tests/test_far_paths.py::test_point_sized_box_from_300_m",
     "kernels/rounded_box.py": "tests/test_rounded_box_funcs.py -k float64",
-    "kernels/arc.py": "tests/test_arc_face_after_edge.py tests/test_arc_sweep.py",
+    "kernels/arc.py": "tests/test_arc_funcs.py tests/test_arc_walk.py -k float64",
 }
 
 KILLED = {"ok_killed", "ok_suspicious"}  # suspicious: a test failed, only slowly

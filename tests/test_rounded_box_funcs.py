@@ -13,7 +13,7 @@ from functools import cache
 import numpy as np
 import pytest
 import warp as wp
-from helpers import shaped_half_extents
+from helpers import TOLERANCES, shaped_half_extents
 from reference import core_distance_and_normal, sweep_reference_batch
 from test_func_contracts import run_rows
 from test_reference import CASES
@@ -36,12 +36,17 @@ def rounded_box_kernel(name: str):
     p = types_of(name)
     funcs = rounded_box_funcs(p)
     sweep_rounded_box, rounded_box_distance = funcs.sweep_rounded_box, funcs.rounded_box_distance
+    start_contact, closer = funcs.start_contact, funcs.closer
 
     @variant_kernel
     def run(a: wp.array[p.vec3], d: wp.array[p.vec3], h: wp.array[p.vec3],
-            radius: wp.array[p.scalar], hit_out: wp.array[wp.int32],
+            radius: wp.array[p.scalar], hit_a: wp.array[wp.int32], t_a: wp.array[p.scalar],
+            hit_b: wp.array[wp.int32], t_b: wp.array[p.scalar], hit_out: wp.array[wp.int32],
             t_out: wp.array[p.scalar], normal_out: wp.array[p.vec3],
-            distance_out: wp.array[p.scalar], start_normal_out: wp.array[p.vec3]):
+            distance_out: wp.array[p.scalar], start_normal_out: wp.array[p.vec3],
+            touching_out: wp.array[wp.int32], moving_in_out: wp.array[wp.int32],
+            contact_normal_out: wp.array[p.vec3], closer_hit_out: wp.array[wp.int32],
+            closer_t_out: wp.array[p.scalar], closer_normal_out: wp.array[p.vec3]):
         i = wp.tid()
         hit, t, n = sweep_rounded_box(a[i], d[i], h[i], radius[i])
         hit_out[i] = hit
@@ -50,21 +55,38 @@ def rounded_box_kernel(name: str):
         distance, start_normal = rounded_box_distance(a[i], h[i], radius[i])
         distance_out[i] = distance
         start_normal_out[i] = start_normal
+        touching, moving_in, contact_normal = start_contact(a[i], d[i], h[i], radius[i])
+        touching_out[i] = touching
+        moving_in_out[i] = moving_in
+        contact_normal_out[i] = contact_normal
+        # the first hit's normal is +x, the second's +y: the output normal tells which was kept
+        c_hit, c_t, c_n = closer(hit_a[i], t_a[i], p.vec3(1.0, 0.0, 0.0), hit_b[i], t_b[i],
+                                 p.vec3(0.0, 1.0, 0.0))
+        closer_hit_out[i] = c_hit
+        closer_t_out[i] = c_t
+        closer_normal_out[i] = c_n
 
     return run
 
 
-def sweep_rows(precision: str, a, d, h, radius) -> dict:
-    """``sweep_rounded_box`` and ``rounded_box_distance`` over rows (local frame)."""
+def sweep_rows(precision: str, a, d, h, radius, hits=None) -> dict:
+    """``sweep_rounded_box``, ``rounded_box_distance`` and ``start_contact`` over rows (local
+    frame), and ``closer`` over the rows of ``hits`` (``(hit_a, t_a, hit_b, t_b)``; none by
+    default)."""
     p = types_of(precision)
     n = len(a)
+    hits = np.zeros((n, 4)) if hits is None else np.asarray(hits, dtype=np.float64)
     return run_rows(rounded_box_kernel(precision), p,
                     {"a": (a, p.vec3), "d": (d, p.vec3),
                      "h": (np.broadcast_to(np.asarray(h, dtype=np.float64), (n, 3)), p.vec3),
                      "radius": (np.broadcast_to(np.asarray(radius, dtype=np.float64), (n,)),
-                                p.scalar)},
+                                p.scalar),
+                     "hit_a": (hits[:, 0], wp.int32), "t_a": (hits[:, 1], p.scalar),
+                     "hit_b": (hits[:, 2], wp.int32), "t_b": (hits[:, 3], p.scalar)},
                     {"hit": wp.int32, "t": p.scalar, "normal": p.vec3, "distance": p.scalar,
-                     "start_normal": p.vec3})
+                     "start_normal": p.vec3, "touching": wp.int32, "moving_in": wp.int32,
+                     "contact_normal": p.vec3, "closer_hit": wp.int32, "closer_t": p.scalar,
+                     "closer_normal": p.vec3})
 
 
 def test_named_cases(precision, tol):
@@ -201,3 +223,98 @@ def test_sharp_start_between_the_grown_and_the_rounded_box(precision):
     for k, name in enumerate(SHARP_STARTS):
         assert out["hit"][k] == 1 and out["t"][k] == 0.0, name
         np.testing.assert_array_equal(out["normal"][k], normals[k], err_msg=name)
+
+
+#: Starts against the core box (1, 0.5, 0.25) with R = 0.125 (face plane x = 1.125): outside,
+#: on the surface and inside, each with a direction, and the expected ``(touching, moving_in)``
+#: of ``start_contact`` (in: ``d . n < -TANGENT_REL |d|``).
+START_CONTACTS = {
+    "outside, moving in": ((1.5, 0.0, 0.0), (-1.0, 0.0, 0.0), (0, 0)),
+    "on the +x face, moving in": ((1.125, 0.25, 0.0), (-1.0, 0.5, 0.0), (1, 1)),
+    "on the +x face, moving out": ((1.125, 0.25, 0.0), (1.0, 0.0, 0.0), (1, 0)),
+    "on the +x face, moving along": ((1.125, 0.25, 0.0), (0.0, 1.0, 0.0), (1, 0)),
+    "inside the rounding of an edge, moving in": ((1.0625, 0.5625, 0.0), (-1.0, -1.0, 0.0),
+                                                  (1, 1)),
+    "inside the core, moving to -z": ((0.5, 0.125, -0.125), (0.0, 0.0, 1.0), (1, 1)),
+    "inside the core, moving out through -z": ((0.5, 0.125, -0.125), (0.0, 0.0, -1.0), (1, 0)),
+}
+
+
+def test_start_contact_flags(precision):
+    """``start_contact``'s flags, 1 or 0: touching for a start on or inside the rounded box
+    (signed distance <= 0), moving in when the direction goes into the surface as well; the
+    normal is the outward one at the start (local frame, [m] and [m] of path)."""
+    rows = list(START_CONTACTS.values())
+    a = np.array([r[0] for r in rows])
+    d = np.array([r[1] for r in rows])
+    out = sweep_rows(precision, a, d, DISTANCE_H, 0.125)
+    for k, (name, (_, _, (touching, moving_in))) in enumerate(START_CONTACTS.items()):
+        assert out["touching"][k] == touching, name
+        assert out["moving_in"][k] == moving_in, name
+    np.testing.assert_allclose(out["contact_normal"][1], (1.0, 0.0, 0.0))
+    np.testing.assert_allclose(out["contact_normal"][4], (np.sqrt(0.5), np.sqrt(0.5), 0.0),
+                               atol=10 * TOLERANCES[precision]["unit"])
+
+
+#: ``closer``'s rows: ``(hit_a, t_a, hit_b, t_b)`` and the one it keeps ("a", "b" or None for
+#: no hit); a tie keeps the first.
+CLOSER_CASES = {
+    "b nearer": ((1, 0.5, 1, 0.25), "b"),
+    "a nearer": ((1, 0.25, 1, 0.5), "a"),
+    "tie keeps the first": ((1, 0.5, 1, 0.5), "a"),
+    "only b hits": ((0, 1.0, 1, 0.75), "b"),
+    "only a hits": ((1, 0.75, 0, 0.25), "a"),
+    "neither hits": ((0, 1.0, 0, 0.25), None),
+}
+
+
+def test_closer_keeps_the_nearer_hit_and_the_first_on_ties(precision):
+    """``closer`` of two hits (times in [0, 1] of the segment): the one with the smaller
+    ``t``, the first one on a tie, the one that hits when only one does."""
+    rows = [r for r, _ in CLOSER_CASES.values()]
+    a = np.full((len(rows), 3), 5.0)
+    out = sweep_rows(precision, a, np.zeros_like(a), DISTANCE_H, 0.125, hits=rows)
+    for k, (name, (row, keep)) in enumerate(CLOSER_CASES.items()):
+        hit_a, t_a, hit_b, t_b = row
+        if keep is None:
+            assert out["closer_hit"][k] == 0, name
+            continue
+        assert out["closer_hit"][k] == 1, name
+        assert out["closer_t"][k] == (t_a if keep == "a" else t_b), name
+        np.testing.assert_array_equal(out["closer_normal"][k],
+                                      (1.0, 0.0, 0.0) if keep == "a" else (0.0, 1.0, 0.0),
+                                      err_msg=name)
+
+
+def test_sharpness_threshold_against_the_local_scale(precision):
+    """A box is sharp when ``R <= SHARP_REL * scale``, the scale being the largest of the
+    grown half extents and ``|a|``: such a box's entry through an edge region is the grown box
+    entry, with the normal of the face crossed last (a rounded one would sweep the edge's
+    capsule and tilt the normal). ``R`` exactly at the threshold (``|a| = 1.25`` exactly, the
+    scale), and boxes 8 m long along each axis entered beside an edge along that axis, with
+    ``R`` = 64 eps, sharp only through the long half extent. Positions [m], local frame."""
+    eps = float(np.finfo(types_of(precision).np_dtype).eps)
+    rows = [  # (a, d, h, R, t, normal)
+        # R = 16 eps * 1.25; z enters 10 eps after y (h_z lowered by 10 eps), y still outside
+        ((0.0, 0.75, 1.0), (0.0, -1.0, -1.0), (0.5, 0.25, 0.5 - 10 * eps), 20 * eps,
+         0.5 - 10 * eps, (0.0, 0.0, 1.0)),
+    ]
+    for long_axis in range(3):
+        h = np.full(3, 0.125)
+        h[long_axis] = 8.0
+        a = np.ones(3)
+        a[long_axis] = 0.0
+        last = 2 if long_axis != 2 else 0  # the face crossed last: 32 eps further to go
+        a[last] += 32 * eps
+        d = -2.0 * (a != 0)
+        normal = np.zeros(3)
+        normal[last] = 1.0
+        rows.append((a, d, h, 64 * eps, (0.875 + 32 * eps - 64 * eps) / 2.0, normal))
+    out = sweep_rows(precision, np.array([r[0] for r in rows], dtype=float),
+                     np.array([r[1] for r in rows], dtype=float),
+                     np.array([r[2] for r in rows], dtype=float),
+                     np.array([r[3] for r in rows]))
+    for k, (_, _, _, _, t, normal) in enumerate(rows):
+        assert out["hit"][k] == 1, k
+        assert out["t"][k] == pytest.approx(t, abs=4 * eps), k
+        np.testing.assert_array_equal(out["normal"][k], normal, err_msg=str(k))

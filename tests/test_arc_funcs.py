@@ -1,0 +1,440 @@
+"""The arc ``@wp.func``s (``kernels/arc.py``) tested directly, in the box's local frame.
+
+``sweep_rounded_box_arc``, ``quadratic_roots`` and ``box_entry`` run through one tiny test kernel
+per precision (a cold build of a few seconds: the mutation check's fast subset for ``arc.py``),
+against answers that do not come from the kernels: closed forms (quadratic roots built from
+chosen roots, the drop and apex times, arcs built backwards from a chosen contact, the grown-box
+windows of quadratic coordinates worked out by hand) and the float64 26-feature reference
+(:func:`arc_reference.arc_contact_by_features`) on random arcs and on grazing edge passes.
+
+Units: positions and half extents [m], velocities [m/s], accelerations [m/s^2], times [s];
+every vector is in the box's local frame (core box ``[-h, h]``, Minkowski radius ``R``).
+"""
+
+from functools import cache
+
+import numpy as np
+import pytest
+import warp as wp
+from arc_reference import arc_contact_by_features, arc_point, signed_distance
+from test_arc_face_after_edge import BIG_R, TAU, falling_root, posed
+from test_arc_face_after_edge import CASES as FACE_AFTER_EDGE
+from test_arc_sweep import (
+    FEATURE_CASES,
+    NORMAL_TOL,
+    POSITION_REL,
+    STEEP,
+    as_precision,
+    built_backwards,
+    closest_approach,
+    contact_case,
+    random_case,
+)
+
+from warpsim.kernels.arc import arc_funcs
+from warpsim.kernels.precision import precision as types_of
+from warpsim.kernels.variant import variant_kernel
+
+#: The box of the named cases: core half extents and Minkowski radius (top face plane y = 1).
+H = np.array([1.0, 0.5, 0.25])
+RB = 0.5
+G = np.array([0.0, -9.81, 0.0])
+SQ2 = np.sqrt(0.5)
+
+
+@cache
+def arc_kernel(name: str):
+    """Per row: the sweep of the arc, the roots of a quadratic and the grown-box entry."""
+    p = types_of(name)
+    scalar, vec3 = p.scalar, p.vec3
+    funcs = arc_funcs(p)
+    sweep, quadratic_roots, box_entry = (funcs.sweep_rounded_box_arc, funcs.quadratic_roots,
+                                         funcs.box_entry)
+
+    @variant_kernel
+    def run(a: wp.array[vec3], v: wp.array[vec3], g: wp.array[vec3], tau: wp.array[scalar],
+            h: wp.array[vec3], radius: wp.array[scalar], quad: wp.array[vec3],
+            s_from: wp.array[scalar], contained: wp.array[wp.vec3i],
+            hit_out: wp.array[wp.int32], s_out: wp.array[scalar], normal_out: wp.array[vec3],
+            count_out: wp.array[wp.int32], r1_out: wp.array[scalar], r2_out: wp.array[scalar],
+            found_out: wp.array[wp.int32], entry_out: wp.array[scalar],
+            axis_out: wp.array[wp.int32]):
+        i = wp.tid()
+        hit, s, n = sweep(a[i], v[i], g[i], tau[i], h[i], radius[i])
+        hit_out[i] = hit
+        s_out[i] = s
+        normal_out[i] = n
+        q = quad[i]
+        count, r1, r2 = quadratic_roots(q[0], q[1], q[2])
+        count_out[i] = count
+        r1_out[i] = r1
+        r2_out[i] = r2
+        found, s_e, axis = box_entry(a[i], v[i], g[i], h[i] + vec3(radius[i], radius[i],
+                                                                       radius[i]),
+                                     s_from[i], tau[i], contained[i])
+        found_out[i] = found
+        entry_out[i] = s_e
+        axis_out[i] = axis
+
+    return run
+
+
+def run_arcs(precision, a, v, g, tau, h, radius, quad=None, s_from=0.0, contained=(0, 0, 0)):
+    """Launch the test kernel over rows (scalars and single vectors broadcast); outputs are
+    pre-filled with a sentinel so that an unwritten one fails the comparison."""
+    p = types_of(precision)
+    n = len(a)
+
+    def rows(x, shape):
+        return np.ascontiguousarray(np.broadcast_to(np.asarray(x, np.float64), shape),
+                                    dtype=p.np_dtype)
+
+    quad = np.zeros((n, 3)) if quad is None else quad
+    inputs = [wp.array(rows(x, (n, 3)), dtype=p.vec3) for x in (a, v, g)]
+    inputs.append(wp.array(rows(tau, (n,)), dtype=p.scalar))
+    inputs.append(wp.array(rows(h, (n, 3)), dtype=p.vec3))
+    inputs.append(wp.array(rows(radius, (n,)), dtype=p.scalar))
+    inputs.append(wp.array(rows(quad, (n, 3)), dtype=p.vec3))
+    inputs.append(wp.array(rows(s_from, (n,)), dtype=p.scalar))
+    inputs.append(wp.array(np.ascontiguousarray(np.broadcast_to(contained, (n, 3)),
+                                                dtype=np.int32), dtype=wp.vec3i))
+    names = ["hit", "s", "normal", "count", "r1", "r2", "found", "entry", "axis"]
+    kinds = [wp.int32, p.scalar, p.vec3, wp.int32, p.scalar, p.scalar, wp.int32, p.scalar,
+             wp.int32]
+    outs = []
+    for kind in kinds:
+        if kind is wp.int32:
+            outs.append(wp.array(np.full(n, -7, np.int32), dtype=kind))
+        else:
+            shape = (n, 3) if kind is p.vec3 else (n,)
+            outs.append(wp.array(np.full(shape, np.nan, p.np_dtype), dtype=kind))
+    wp.launch(arc_kernel(precision), dim=n, inputs=inputs, outputs=outs, device="cpu")
+    return {k: o.numpy() for k, o in zip(names, outs, strict=True)}
+
+
+# --- named arcs against closed forms ----------------------------------------------------------
+
+TOP = 0.5 + RB  # top face plane
+
+
+def named_arcs():
+    """``name: (a, v, g, tau, h, R, hit, s, normal)``, each answer worked out by hand; ``s`` and
+    ``normal`` are ``None`` for a miss (``s = tau``, zero normal)."""
+    cases = {
+        # from rest 2 m above the top face plane, g = -8: 2 = 4 s^2
+        "drop onto the top face": ([0.25, 3.0, 0.125], [0, 0, 0], [0, -8, 0], 1.0, H, RB,
+                                   1, np.sqrt(0.5), [0, 1, 0]),
+        "drop, tau too short": ([0.25, 3.0, 0.125], [0, 0, 0], [0, -8, 0], 0.5, H, RB,
+                                0, None, None),
+        # g = -16: 2 = 8 s^2 at s = 1/2, the end of the span (a contact at tau counts)
+        "drop, lands exactly at tau": ([0.25, 3.0, 0.125], [0, 0, 0], [0, -16, 0], 0.5, H, RB,
+                                       1, 0.5, [0, 1, 0]),
+        "drop onto a sharp box": ([0.25, 2.0, 0.125], [0, 0, 0], [0, -8, 0], 1.0, H, 0.0,
+                                  1, np.sqrt(1.5 / 4.0), [0, 1, 0]),
+        # thrown sideways onto the -x face plane x = -1.5 of a sharp box (grown box = core)
+        "sharp box, -x face": ([-3.5, 0.25, 0.0], [4, 0.5, 0], [0, -2, 0], 1.0, [1.5, 0.5, 0.25],
+                               0.0, 1, 0.5, [-1, 0, 0]),
+        # a sharp box is closed: sliding along its top plane y = 0.5 into the -x face plane
+        "sharp box, along its top plane into -x": ([-3.5, 0.5, 0.0], [4, 0, 0], [0, 0, -1], 1.0,
+                                                   [1.5, 0.5, 0.25], 0.0, 1, 0.5, [-1, 0, 0]),
+        # rising under the bottom plane y = -1: apex exactly on it (tangent), 2^-8 m above
+        # it (a hit before the apex, at y(s) = -1: s = (1 - sqrt(dip)) / 2), or 2^-8 short
+        "apex exactly on the bottom face": ([0.25, -2.0, 0.0], [0.5, 4, 0], [0, -8, 0], 1.0,
+                                            H, RB, 0, None, None),
+        "apex dips into the bottom face": ([0.25, -2.0 + 2.0**-8, 0.0], [0.5, 4, 0],
+                                           [0, -8, 0], 1.0, H, RB,
+                                           1, 0.5 * (1 - 2.0**-4), [0, -1, 0]),
+        "apex short of the bottom face": ([0.25, -2.0 - 2.0**-8, 0.0], [0.5, 4, 0],
+                                          [0, -8, 0], 1.0, H, RB, 0, None, None),
+        # thrown up from a sharp box's bottom face plane, the apex on it: tangent, no hit
+        "sharp box, apex on the bottom plane": ([0.25, -1.5, 0.0], [0.5, 4, 0], [0, -8, 0],
+                                                1.0, H, 0.0, 0, None, None),
+        # g = 0: the chord's linear sweep; face entry at x = -1.5, t = 1.5 / 4
+        "no gravity, -x face": ([-3.0, 0.125, 0.0], [4, 0, 0], [0, 0, 0], 1.0, H, RB,
+                                1, 0.375, [-1, 0, 0]),
+        "no gravity, tau 2": ([-3.0, 0.125, 0.0], [2, 0, 0], [0, 0, 0], 2.0, H, RB,
+                              1, 0.75, [-1, 0, 0]),
+        "no gravity, short": ([-3.0, 0.125, 0.0], [1, 0, 0], [0, 0, 0], 1.0, H, RB,
+                              0, None, None),
+        "motionless": ([0.0, 3.0, 0.0], [0, 0, 0], [0, 0, 0], 1.0, H, RB, 0, None, None),
+        "tau 0": ([0.25, 1.5, 0.0], [0, -4, 0], [0, -8, 0], 0.0, H, RB, 0, None, None),
+        "tau < 0": ([0.25, 1.5, 0.0], [0, -4, 0], [0, -8, 0], -1.0, H, RB, 0, None, None),
+        # starts on the surface (top face plane y = 1)
+        "on the face moving in": ([0.25, TOP, 0.0], [1, -1, 0], G, 1.0, H, RB, 1, 0.0,
+                                  [0, 1, 0]),
+        "on the face at rest, gravity in": ([0.25, TOP, 0.0], [0, 0, 0], G, 1.0, H, RB, 1, 0.0,
+                                            [0, 1, 0]),
+        "on the face along, gravity in": ([0.25, TOP, 0.0], [1, 0, 0.5], G, 1.0, H, RB, 1, 0.0,
+                                          [0, 1, 0]),
+        # leaving at 2 m/s under g = -8: back on the plane at 2 * 2 / 8 = 0.5
+        "on the face leaving, comes back": ([0.25, TOP, 0.0], [0.25, 2, 0], [0, -8, 0], 1.0,
+                                            H, RB, 1, 0.5, [0, 1, 0]),
+        "on the face leaving, tau short": ([0.25, TOP, 0.0], [0.25, 2, 0], [0, -8, 0], 0.25,
+                                           H, RB, 0, None, None),
+        "on a wall along, gravity along": ([1.0 + RB, 0.0, 0.0], [0, 0.5, 0.1], G, 1.0, H, RB,
+                                           0, None, None),
+        "under the bottom leaving, gravity away": ([0.25, -TOP, 0.0], [0.5, -1, 0], G, 1.0,
+                                                   H, RB, 0, None, None),
+        "on an edge along, gravity in": ([1.0 + RB * SQ2, 0.5 + RB * SQ2, 0.0], [0, 0, 1], G,
+                                         1.0, H, RB, 1, 0.0, [SQ2, SQ2, 0]),
+        # inside the core box moving out, gravity out too: no hit
+        "inside, moving out": ([0.0, 0.25, 0.0], [0, 3, 0], [0, 1, 0], 1.0, H, RB,
+                               0, None, None),
+    }
+    s_star = 0.375
+    for name, point, normal, u, g in FEATURE_CASES:
+        a, v = built_backwards(point, np.asarray(normal, float), u, s_star, g)
+        cases[f"built backwards: {name}"] = (a, v, g, 1.0, H, RB, 1, s_star, normal)
+    for perm, side in FACE_AFTER_EDGE:
+        h, a, v, g, axis = posed(perm, side)
+        normal = np.zeros(3)
+        normal[axis] = side
+        cases[f"face after the edge {perm}{side:+.0f}"] = (
+            a, v, g, TAU, h, BIG_R, 1, falling_root(a, v, g, h, axis, side), normal)
+        h, a, v, g, _ = posed(perm, side, gravity_sign=-1.0)
+        cases[f"gravity away from the face {perm}{side:+.0f}"] = (
+            a, v, g, TAU, h, BIG_R, 0, None, None)
+    return cases
+
+
+NAMED = named_arcs()
+
+
+def test_named_arcs_against_closed_forms(precision):
+    """Drops, throws and apex touches of faces (rounded and sharp), arcs built backwards onto
+    faces, edges and corners, arcs that pass an edge and land on the face behind it (or, with
+    gravity reversed, leave), starts on the surface (in, along, leaving, coming back), zero
+    gravity, ``tau <= 0``: hit, contact time [s] and outward normal (local frame)."""
+    rows = list(NAMED.values())
+    # the inputs as the precision holds them (the closed forms are exact for these)
+    cols = [np.array([np.asarray(r[k], float) for r in rows]) for k in range(6)]
+    out = run_arcs(precision, *cols)
+    s_tol = {"float32": 4e-6, "float64": 1e-13}[precision]
+    for k, (name, row) in enumerate(NAMED.items()):
+        hit, s, normal = row[6:]
+        tau = float(as_precision(row[3], precision))
+        assert out["hit"][k] == hit, name
+        if hit:
+            assert out["s"][k] == pytest.approx(s, abs=s_tol * max(1.0, tau)), name
+            np.testing.assert_allclose(out["normal"][k], normal, atol=NORMAL_TOL[precision],
+                                       err_msg=name)
+        else:
+            assert out["s"][k] == tau, name
+            np.testing.assert_array_equal(out["normal"][k], 0.0, err_msg=name)
+
+
+def test_built_backwards_cases_are_first_contacts():
+    """Self-check of the construction above: the float64 reference finds the contacts that
+    the named cases built backwards claim, and nothing earlier."""
+    for name, (a, v, g, tau, h, radius, _hit, s, normal) in NAMED.items():
+        if not name.startswith(("built backwards", "face after")):
+            continue
+        ref_hit, ref_s, ref_n = arc_contact_by_features(np.asarray(a, float),
+                                                        np.asarray(v, float),
+                                                        np.asarray(g, float), tau, h, radius)
+        assert ref_hit and ref_s == pytest.approx(s, abs=1e-9), name
+        np.testing.assert_allclose(ref_n, normal, atol=1e-9, err_msg=name)
+
+
+# --- quadratic roots --------------------------------------------------------------------------
+
+#: ``(qa, qb, qc)`` of ``qa s^2 + qb s + qc`` built from chosen roots, and the answer:
+#: ``(count, r1, r2)`` with ``r1 <= r2`` (no root: the "no such time" 1e30).
+NONE = 1.0e30
+QUADRATICS = {
+    "two roots, 1 and 2": ((1.0, -3.0, 2.0), (2, 1.0, 2.0)),
+    "two negative roots": ((1.0, 3.0, 2.0), (2, -2.0, -1.0)),
+    "symmetric, qb = 0": ((2.0, 0.0, -8.0), (2, -2.0, 2.0)),
+    "downward parabola": ((-1.0, 0.0, 4.0), (2, -2.0, 2.0)),
+    "downward, both positive": ((-2.0, 6.0, -4.0), (2, 1.0, 2.0)),
+    "double root 1": ((1.0, -2.0, 1.0), (2, 1.0, 1.0)),
+    "double root 0": ((1.0, 0.0, 0.0), (2, 0.0, 0.0)),
+    "root 0 and 4": ((0.5, -2.0, 0.0), (2, 0.0, 4.0)),
+    "no real root": ((1.0, 0.0, 1.0), (0, NONE, NONE)),
+    "no real root, qb > 0": ((1.0, 1.0, 1.0), (0, NONE, NONE)),
+    "linear": ((0.0, 2.0, -1.0), (1, 0.5, 0.5)),
+    "linear, negative slope": ((0.0, -4.0, 1.0), (1, 0.25, 0.25)),
+    "constant": ((0.0, 0.0, 1.0), (0, NONE, NONE)),
+    # (s - 2^-20)(s - 2^20): the small root by cancellation in the naive form
+    "far-apart roots": ((1.0, -(2.0**20 + 2.0**-20), 1.0), (2, 2.0**-20, 2.0**20)),
+    "far-apart roots, negative": ((1.0, 2.0**20 + 2.0**-20, 1.0), (2, -(2.0**20), -(2.0**-20))),
+}
+
+
+def test_quadratic_roots_against_chosen_roots(precision):
+    """The real roots of quadratics built from chosen roots (exact in binary), ordered, with
+    the count: two (a double root twice), one for a linear equation, none; the far-apart pair
+    to a few ulps each (no cancellation)."""
+    rows = list(QUADRATICS.values())
+    n = len(rows)
+    zeros = np.zeros((n, 3))
+    out = run_arcs(precision, zeros, zeros, zeros, 1.0, np.ones(3), 0.0,
+                   quad=np.array([q for q, _ in rows]))
+    eps = float(np.finfo(types_of(precision).np_dtype).eps)
+    for k, (name, (_, (count, r1, r2))) in enumerate(QUADRATICS.items()):
+        assert out["count"][k] == count, name
+        for got, want in ((out["r1"][k], r1), (out["r2"][k], r2)):
+            if want == NONE:
+                assert got == np.float32(NONE) if precision == "float32" else got == NONE, name
+            else:
+                assert got == pytest.approx(want, rel=8 * eps, abs=8 * eps * (want == 0)), name
+
+
+# --- the grown-box entry ----------------------------------------------------------------------
+
+#: ``(a, v, g, tau, bound, s_from, contained, (found, s, axis))``: arcs whose per-axis windows
+#: ``|x_i(s)| <= bound_i`` are worked out by hand (``bound`` is passed as ``h`` with ``R = 0``).
+ROOT3 = np.sqrt(0.75)
+ENTRIES = {
+    # x = -3 + 4 s reaches -1 at s = 0.5
+    "straight, through -x": ([-3, 0, 0], [4, 0, 0], [0, 0, 0], 1.0, [1, 1, 1], 0.0, (0, 0, 0),
+                             (1, 0.5, 0)),
+    "straight, too short": ([-3, 0, 0], [4, 0, 0], [0, 0, 0], 0.25, [1, 1, 1], 0.0, (0, 0, 0),
+                            (0, None, None)),
+    # x = 3 - 4 s reaches +1 at s = 0.5
+    "straight, through +x": ([3, 0, 0], [-4, 0, 0], [0, 0, 0], 1.0, [1, 1, 1], 0.0, (0, 0, 0),
+                             (1, 0.5, 0)),
+    # y = 3 - 8 s^2 reaches 1 at s = 1/2 = tau
+    "drop, entry exactly at tau": ([0, 3, 0], [0, 0, 0], [0, -16, 0], 0.5, [1, 1, 1], 0.0,
+                                   (0, 0, 0), (1, 0.5, 1)),
+    # y = 3 - 4 s^2 reaches 1 at sqrt(0.5)
+    "drop through +y": ([0, 3, 0], [0, 0, 0], [0, -8, 0], 1.0, [1, 1, 1], 0.0, (0, 0, 0),
+                        (1, np.sqrt(0.5), 1)),
+    "drop, x and z flagged contained": ([0, 3, 0], [0, 0, 0], [0, -8, 0], 1.0,
+                                                 [1, 1, 1], 0.0, (1, 0, 1),
+                                                 (1, np.sqrt(0.5), 1)),
+    # rising through -z: z = -2 + 2 s + 2 s^2 = -0.5 at s = 0.5 (and y, x inside)
+    "rising through -z": ([0, 0, -2], [0, 0, 2], [0, 0, 4], 1.0, [1, 1, 0.5], 0.0, (0, 0, 0),
+                          (1, 0.5, 2)),
+    "start inside": ([0.5, 0, 0], [1, 0, 0], [0, -1, 0], 1.0, [1, 1, 1], 0.0, (0, 0, 0),
+                     (1, 0.0, -1)),
+    "start inside, from s = 0.25": ([0.25, 0, 0], [1, 0, 0], [0, -1, 0], 1.0, [1, 1, 1], 0.25,
+                                    (0, 0, 0), (1, 0.25, -1)),
+    # x = 4 (s - 1)^2 - 2 is inside [-1, 1] on [1 - sqrt(3/4), 1/2] and [3/2, 1 + sqrt(3/4)];
+    # y = 1.7 - s comes inside at 0.7: the first window is missed, the second is the entry
+    "second window of x": ([2, 1.7, 0], [-8, -1, 0], [8, 0, 0], 2.0, [1, 1, 1], 0.0,
+                           (0, 0, 0), (1, 1.5, 0)),
+    "first window of x": ([2, 0.7, 0], [-8, -1, 0], [8, 0, 0], 2.0, [1, 1, 1], 0.0,
+                          (0, 0, 0), (1, 1.0 - ROOT3, 0)),
+    "between the windows of x": ([2, 1.7, 0], [-8, -1, 0], [8, 0, 0], 1.25, [1, 1, 1], 0.0,
+                                 (0, 0, 0), (0, None, None)),
+    # x = -0.5 throughout, y = -1.7 + s enters at 0.7, z = 1.6 - s at 0.6: y enters last
+    "y enters last": ([-0.5, -1.7, 1.6], [0, 1, -1], [0, 0, 0], 2.0, [1, 1, 1], 0.0,
+                      (0, 0, 0), (1, 0.7, 1)),
+    # a plate (bound 0 in y): y = 1 - 2 s is inside at the single instant 0.5
+    "plate, single instant": ([0.25, 1, 0], [0, -2, 0], [0, 0, 0], 1.0, [1, 0, 1], 0.0,
+                              (0, 0, 0), (1, 0.5, 1)),
+    # beside the box in z the whole time: no entry
+    "beside the box": ([-3, 0, 2], [4, 0, 0], [0, -1, 0], 1.0, [1, 1, 1], 0.0, (0, 0, 0),
+                       (0, None, None)),
+}
+
+
+def test_box_entry_against_hand_windows(precision):
+    """The first time in ``[s_from, tau]`` inside the closed box ``[-bound, bound]`` and the
+    axis entered last (-1: inside at ``s_from``): straight and parabolic coordinates, two
+    windows of one axis, a plate's single instant, no entry; positions [m], times [s]."""
+    rows = list(ENTRIES.values())
+    cols = [np.array([np.asarray(r[k], float) for r in rows]) for k in range(5)]
+    out = run_arcs(precision, *cols[:4], cols[4], 0.0,
+                   s_from=np.array([r[5] for r in rows]),
+                   contained=np.array([r[6] for r in rows]))
+    s_tol = {"float32": 4e-7, "float64": 1e-15}[precision]
+    for k, (name, row) in enumerate(ENTRIES.items()):
+        found, s, axis = row[7]
+        assert out["found"][k] == found, name
+        if found:
+            assert out["entry"][k] == pytest.approx(s, abs=s_tol * 4), name
+            assert out["axis"][k] == axis, name
+
+
+# --- against the float64 reference ------------------------------------------------------------
+
+def random_arcs(precision, count=150, seed=7):
+    """Random boxes (boxes, plates, sticks, points, cubes; sharp and rounded), starts outside,
+    any gravity direction; two in three built backwards from a chosen contact."""
+    rng = np.random.default_rng(seed)
+    kinds = ["box", "plate", "stick", "point", "cube"]
+    cases = []
+    while len(cases) < count:
+        kind = kinds[len(cases) % len(kinds)]
+        case = random_case(rng, kind) if len(cases) % 3 == 2 else contact_case(rng, kind)
+        if case is None:
+            continue
+        h, radius, a, v, g, tau = case
+        a, v, g, h = (as_precision(x, precision) for x in (a, v, g, h))
+        radius = float(as_precision(radius, precision))
+        if signed_distance(a, h, radius) > 0.05:
+            cases.append((a, v, g, tau, h, radius))
+    return cases
+
+
+def test_random_arcs_match_the_reference(precision):
+    """The kernel against the 26-feature float64 reference on random arcs: the verdict where
+    it is clear, the contact point [m] (to a few hundred ulps of the local scale over the
+    entry's steepness) and the normal; misses end at ``tau`` with a zero normal."""
+    cases = random_arcs(precision)
+    cols = [np.array([np.asarray(c[k], float) for c in cases]) for k in range(6)]
+    out = run_arcs(precision, *cols)
+    hits = misses = 0
+    for k, (a, v, g, tau, h, radius) in enumerate(cases):
+        ref_hit, ref_s, ref_n = arc_contact_by_features(a, v, g, tau, h, radius)
+        scale = max(np.abs(a).max(), h.max() + radius)
+        if ref_hit:
+            u = v + g * ref_s
+            steep = -np.dot(u, ref_n) / np.linalg.norm(u)
+            if steep < STEEP:
+                continue
+            assert out["hit"][k] == 1, k
+            np.testing.assert_allclose(arc_point(a, v, g, out["s"][k]),
+                                       arc_point(a, v, g, ref_s),
+                                       atol=POSITION_REL[precision] * scale / steep)
+            if radius > 0.0:
+                np.testing.assert_allclose(out["normal"][k], ref_n,
+                                           atol=NORMAL_TOL[precision] / steep)
+            hits += 1
+        elif closest_approach(a, v, g, tau, h, radius) > 1e-3 * scale:
+            assert out["hit"][k] == 0, k
+            assert out["s"][k] == float(as_precision(tau, precision)), k
+            np.testing.assert_array_equal(out["normal"][k], 0.0)
+            misses += 1
+    assert hits >= 80 and misses >= 10
+
+
+def test_grazing_edge_passes(precision):
+    """Arcs whose apex is at ``R (1 + eps)`` from the +x+y edge cylinder (gravity out along
+    the edge's diagonal normal): clear misses (``eps > 0``) miss, clear dips hit where the
+    float64 reference enters, to the position error over the radial speed [m/s]; every hit
+    moves in, before the apex."""
+    rng = np.random.default_rng(11)
+    n = 200
+    eps = rng.choice([-1.0, 1.0], n) * 10.0 ** -rng.uniform(1, 7, n)
+    normal = np.array([SQ2, SQ2, 0.0])
+    tangent = np.array([-SQ2, SQ2, 0.0])
+    apex = np.array([1.0, 0.5, 0.0]) + (RB * (1 + eps))[:, None] * normal
+    apex[:, 2] = rng.uniform(-0.2, 0.2, n)
+    g = 9.81 * normal
+    s_apex = 0.25
+    v_apex = (rng.uniform(-0.2, 0.2, n)[:, None] * tangent
+              + rng.uniform(-1, 1, n)[:, None] * np.array([0.0, 0.0, 1.0]))
+    v = v_apex - g * s_apex
+    a = apex - v * s_apex - 0.5 * g * s_apex**2
+    a, v, g = (as_precision(x, precision) for x in (a, v, g))
+    out = run_arcs(precision, a, v, g, 0.5, H, RB)
+    hit, s, nrm = out["hit"], out["s"], out["normal"]
+    assert np.isfinite(s).all() and np.isfinite(nrm).all()
+    u = v + g * s[:, None]
+    assert np.all(np.einsum("ij,ij->i", u[hit == 1], nrm[hit == 1]) < 0.0)
+    clear = 1e-3 if precision == "float32" else 1e-9
+    assert not hit[eps > clear].any()
+    assert hit[eps < -clear].all()
+    assert np.all(s[hit == 1] <= s_apex * (1 + 1e-6))
+    checked = 0
+    for k in np.nonzero(eps < -clear)[0]:
+        ref_hit, ref_s, ref_n = arc_contact_by_features(a[k], v[k], g, 0.5, H, RB)
+        assert ref_hit
+        radial = -np.dot(v[k] + g * ref_s, ref_n)
+        assert s[k] == pytest.approx(ref_s, abs=POSITION_REL[precision] * 2.0 / radial)
+        np.testing.assert_allclose(nrm[k], ref_n, atol=NORMAL_TOL[precision] * 2.0 / radial)
+        checked += 1
+    assert checked >= 25
