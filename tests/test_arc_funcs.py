@@ -6,6 +6,8 @@ against answers that do not come from the kernels: closed forms (quadratic roots
 chosen roots, the drop and apex times, arcs built backwards from a chosen contact, the grown-box
 windows of quadratic coordinates worked out by hand) and the float64 26-feature reference
 (:func:`arc_reference.arc_contact_by_features`) on random arcs and on grazing edge passes.
+The piece walk's root polish and dip search (``polish_root``, ``dip_below``) run through a
+second tiny kernel, on quartic gaps whose roots and minima come from NumPy's polynomial roots.
 
 Units: positions and half extents [m], velocities [m/s], accelerations [m/s^2], times [s];
 every vector is in the box's local frame (core box ``[-h, h]``, Minkowski radius ``R``).
@@ -438,3 +440,145 @@ def test_grazing_edge_passes(precision):
         np.testing.assert_allclose(nrm[k], ref_n, atol=NORMAL_TOL[precision] * 2.0 / radial)
         checked += 1
     assert checked >= 25
+
+
+# --- the quartic piece's root polish and dip search, called directly ---------------------------
+
+def inner_func(outer, name):
+    """The ``@wp.func`` ``name`` that ``outer`` calls (read from its Python closure): the piece
+    walk's helpers are not in the namespace of :func:`arc_funcs`."""
+    code, cells = outer.func.__code__, outer.func.__closure__
+    return dict(zip(code.co_freevars, (c.cell_contents for c in cells), strict=True))[name]
+
+
+@cache
+def search_kernel(name: str):
+    """Per row: ``dip_below`` and ``polish_root`` on the gap ``F(s) = |w(s)|^2 - R^2``."""
+    p = types_of(name)
+    scalar, vec3 = p.scalar, p.vec3
+    quartic_entry = inner_func(inner_func(arc_funcs(p).sweep_rounded_box_arc, "walk_pieces"),
+                               "quartic_entry")
+    dip_below, polish_root = (inner_func(quartic_entry, "dip_below"),
+                              inner_func(quartic_entry, "polish_root"))
+
+    @variant_kernel
+    def run(c0: wp.array[vec3], c1: wp.array[vec3], c2: wp.array[vec3],
+            radius: wp.array[scalar], lo: wp.array[scalar], hi: wp.array[scalar],
+            tol: wp.array[scalar], found_out: wp.array[wp.int32], dip_out: wp.array[scalar],
+            root_out: wp.array[scalar]):
+        i = wp.tid()
+        found, s = dip_below(c0[i], c1[i], c2[i], radius[i], lo[i], hi[i], tol[i])
+        found_out[i] = found
+        dip_out[i] = s
+        root_out[i] = polish_root(c0[i], c1[i], c2[i], radius[i], lo[i], hi[i], tol[i])
+
+    return run
+
+
+def run_searches(precision, rows):
+    """Launch :func:`search_kernel` over rows ``(c0, c1, c2, R, lo, hi, tol)``."""
+    p = types_of(precision)
+    cols = [np.array([np.asarray(r[k], np.float64) for r in rows]) for k in range(7)]
+    inputs = [wp.array(c.astype(p.np_dtype), dtype=p.vec3) for c in cols[:3]]
+    inputs += [wp.array(c.astype(p.np_dtype), dtype=p.scalar) for c in cols[3:]]
+    n = len(rows)
+    outs = [wp.array(np.full(n, -7, np.int32), dtype=wp.int32),
+            wp.array(np.full(n, np.nan, p.np_dtype), dtype=p.scalar),
+            wp.array(np.full(n, np.nan, p.np_dtype), dtype=p.scalar)]
+    wp.launch(search_kernel(precision), dim=n, inputs=inputs, outputs=outs, device="cpu")
+    return [o.numpy() for o in outs]
+
+
+def gap_polynomial(c0, c1, c2, radius):
+    """``F(s) = |c0 + c1 s + c2 s^2|^2 - R^2`` as a float64 NumPy polynomial [m^2]."""
+    parts = [np.polynomial.Polynomial([c0[i], c1[i], c2[i]]) for i in range(3)]
+    return sum(q * q for q in parts) - radius * radius
+
+
+#: Convex parts of ``F`` (``F > 0`` and falling at ``lo``, rising at ``hi``), the core offset's
+#: coefficients ``c0`` [m], ``c1`` [m/s], ``c2`` [m/s^2] in the box's local frame with the time
+#: origin at the piece's start, ``R`` [m], ``lo``, ``hi`` and the stopping step ``tol`` [s].
+#: ``4 ulps`` is the sweep's own ``ROOT_ULPS`` of the span; the coarse one stops at the first
+#: small Newton step, so that only the check after the stop sees ``F <= 0``.
+ULPS = 4.0 * np.finfo(np.float64).eps
+DIPS = {
+    # a part after a concave one (F'' = 0 at 6.684 s): the first guess, the tangents' crossing,
+    # lies above F's minimum (-2.5e-6 R^2 at 10.58 s), which Newton on F' must reach
+    "late in a part after a concave one": (
+        [0.8911669542823284, 0.3208483045665637, -0.818230227390307],
+        [0.06534884780575859, -0.044787022711091064, 0.0785238216493645],
+        [-0.008550176076538457, 0.00729515525172918, -0.00016005605865926267],
+        0.9119302031831882, 6.976514288186557, 10.817404675247317, ULPS * 10.817404675247317),
+    # F convex throughout, a minimum of -7.4e-8 R^2 at 3.69 s of a 6.7 s part from lo = 0
+    "shallow, from the piece's start": (
+        [-1.8890132459676727, -0.17477209205516195, -0.42219041157635356],
+        [0.008424529948517372, 0.008569600397883933, 0.08351219664091397],
+        [-0.001729127141338856, -0.0005871536651419724, 0.0031763901795499364],
+        1.888858591137986, 0.0, 6.705100641952094, ULPS * 6.705100641952094),
+    # the tangents' bound is below 0 but F stays above 0.024 R^2: no dip, and F <= 0 outside
+    # the part (before 39.8 s) must not be reported
+    "no dip, the bound below zero": (
+        [-2.728670128606971, -0.009672544916135537, -0.9487755307207126],
+        [-0.05647730314094708, 0.01981280986342682, 0.01906005049792493],
+        [0.00129553615866038, -0.00010930894424654364, -0.0008857809646640805],
+        3.2359857837443875, 39.80136492814271, 105.52083631579939,
+        ULPS * 105.52083631579939),
+    # a minimum of -3.2e-8 R^2, found after a stop with a coarse tol (1e-3 of the part)
+    "found at the check after the stop": (
+        [0.5889689337804737, -0.8407215900583078, -0.5060254839367364],
+        [-1.080492991440681, 1.651237242261867, -1.257984452981859],
+        [2.6770347484992096, -1.7006651730908706, -8.137292302310689],
+        1.1029519914026764, 0.0, 0.7318419276335691, 7.318419276335691e-4),
+}
+
+
+@pytest.mark.parametrize("precision", ["float64"])
+def test_dip_search_on_shallow_convex_parts(precision):
+    """``dip_below`` on convex parts whose dip (if any) is too shallow for the first guess:
+    found exactly when F's float64 minimum on ``[lo, hi]`` (from the real roots of ``F'``) is
+    below zero, and then at a time inside the part where F <= 0 (to rounding, 1e-12 R^2).
+    Float64 only: the dips are 1e-6 to 1e-8 of R^2 deep, below float32's resolution of F."""
+    rows = list(DIPS.values())
+    found, s, _ = run_searches(precision, rows)
+    for k, (name, (c0, c1, c2, radius, lo, hi, _tol)) in enumerate(DIPS.items()):
+        f = gap_polynomial(c0, c1, c2, radius)
+        assert np.all(f.deriv(2)(np.linspace(lo, hi, 2001)) > 0.0), name  # convex part
+        assert f(lo) > 0.0 and f(hi) > 0.0 and f.deriv()(lo) < 0.0 < f.deriv()(hi), name
+        crit = [r.real for r in f.deriv().roots() if abs(r.imag) < 1e-12 and lo < r.real < hi]
+        depth = min(f(t) for t in [lo, hi, *crit]) / radius**2
+        assert abs(depth) > 1e-9, name  # clear of a tangent touch
+        assert found[k] == int(depth < 0.0), name
+        if depth < 0.0:
+            assert lo <= s[k] <= hi, name
+            assert f(s[k]) <= 1e-12 * radius**2, name
+
+
+#: Parts with one root of F in ``[lo, hi]``, ``F(lo) > 0 >= F(hi)``, where a Newton step from
+#: the midpoint leaves the bracket (units as in :data:`DIPS`; ``tol`` 4 ulps of 0.31 s).
+ROOTS = {
+    "steep near the root, flat at the midpoint": (
+        [1.3551605045124333, 0.9666960256554462, 1.3010442986255635],
+        [2.037028632107496, 3.946431907397624, 1.9375375876223802],
+        [-6.850895075610787, -15.135120751811126, -14.631526789476732],
+        2.0777532358301296, 0.0, 0.22629161909665277, ULPS * 0.31),
+    "a second root beyond the bracket": (
+        [0.3160481273078601, -0.23779689710483434, -1.8960106100940826],
+        [4.6515751075047485, -0.02803024263352401, -1.0824765355817787],
+        [-9.648123046245633, -9.690477407424607, 9.96247041605571],
+        1.9354830445337592, 0.0, 0.307068407148792, ULPS * 0.31),
+}
+
+
+@pytest.mark.parametrize("precision", ["float64"])
+def test_root_polish_stays_in_its_bracket(precision):
+    """``polish_root``: the root of F in ``[lo, hi]`` [s], against the float64 NumPy roots of
+    the quartic, to 1e-12 of the bracket (the kernel stops at 4 ulps). Float64 only, as the
+    dip search above (one kernel for both)."""
+    rows = list(ROOTS.values())
+    _, _, root = run_searches(precision, rows)
+    for k, (name, (c0, c1, c2, radius, lo, hi, _tol)) in enumerate(ROOTS.items()):
+        f = gap_polynomial(c0, c1, c2, radius)
+        assert f(lo) > 0.0 >= f(hi), name
+        real = [r.real for r in f.roots() if abs(r.imag) < 1e-9 and lo <= r.real <= hi]
+        assert len(real) == 1, name
+        assert root[k] == pytest.approx(real[0], abs=1e-12 * (hi - lo)), name
