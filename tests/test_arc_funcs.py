@@ -28,8 +28,10 @@ from test_arc_sweep import (
     STEEP,
     as_precision,
     built_backwards,
+    check_edge_grazes,
     closest_approach,
     contact_case,
+    edge_graze_arcs,
     random_case,
 )
 
@@ -405,40 +407,13 @@ def test_random_arcs_match_the_reference(precision):
 
 def test_grazing_edge_passes(precision):
     """Arcs whose apex is at ``R (1 + eps)`` from the +x+y edge cylinder (gravity out along
-    the edge's diagonal normal): clear misses (``eps > 0``) miss, clear dips hit where the
-    float64 reference enters, to the position error over the radial speed [m/s]; every hit
-    moves in, before the apex."""
-    rng = np.random.default_rng(11)
-    n = 200
-    eps = rng.choice([-1.0, 1.0], n) * 10.0 ** -rng.uniform(1, 7, n)
-    normal = np.array([SQ2, SQ2, 0.0])
-    tangent = np.array([-SQ2, SQ2, 0.0])
-    apex = np.array([1.0, 0.5, 0.0]) + (RB * (1 + eps))[:, None] * normal
-    apex[:, 2] = rng.uniform(-0.2, 0.2, n)
-    g = 9.81 * normal
-    s_apex = 0.25
-    v_apex = (rng.uniform(-0.2, 0.2, n)[:, None] * tangent
-              + rng.uniform(-1, 1, n)[:, None] * np.array([0.0, 0.0, 1.0]))
-    v = v_apex - g * s_apex
-    a = apex - v * s_apex - 0.5 * g * s_apex**2
-    a, v, g = (as_precision(x, precision) for x in (a, v, g))
+    the edge's diagonal normal; ``test_arc_sweep.edge_graze_arcs``), through the funcs' kernel:
+    clear misses miss, clear dips hit where the float64 reference enters, with its normal, to
+    the position error over the radial speed [m/s]; every hit moves in, before the apex."""
+    a, v, g, eps = edge_graze_arcs(200, precision)
     out = run_arcs(precision, a, v, g, 0.5, H, RB)
-    hit, s, nrm = out["hit"], out["s"], out["normal"]
-    assert np.isfinite(s).all() and np.isfinite(nrm).all()
-    u = v + g * s[:, None]
-    assert np.all(np.einsum("ij,ij->i", u[hit == 1], nrm[hit == 1]) < 0.0)
-    clear = 1e-3 if precision == "float32" else 1e-9
-    assert not hit[eps > clear].any()
-    assert hit[eps < -clear].all()
-    assert np.all(s[hit == 1] <= s_apex * (1 + 1e-6))
-    checked = 0
-    for k in np.nonzero(eps < -clear)[0]:
-        ref_hit, ref_s, ref_n = arc_contact_by_features(a[k], v[k], g, 0.5, H, RB)
-        assert ref_hit
-        radial = -np.dot(v[k] + g * ref_s, ref_n)
-        assert s[k] == pytest.approx(ref_s, abs=POSITION_REL[precision] * 2.0 / radial)
-        np.testing.assert_allclose(nrm[k], ref_n, atol=NORMAL_TOL[precision] * 2.0 / radial)
-        checked += 1
+    checked = check_edge_grazes(precision, a, v, g, eps, out["hit"], out["s"], out["normal"],
+                                check_normal=True)
     assert checked >= 25
 
 

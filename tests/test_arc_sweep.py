@@ -257,12 +257,13 @@ def test_apex_touch_of_a_face(dip, precision):
         np.testing.assert_array_equal(n[0], 0.0)
 
 
-def test_grazing_arcs_are_consistent(precision):
-    """Arcs whose closest approach to an edge cylinder is R (1 +- 10^-k), at their apex: gravity
-    points out along the edge's diagonal normal, so the arc comes in along it, stops there and
-    goes back. Hits only while moving in, all finite; clear misses miss, clear dips hit."""
-    rng = np.random.default_rng(11)
-    n = 400
+def edge_graze_arcs(n: int, precision: str, seed: int = 11):
+    """``n`` arcs whose closest approach to the ``+x+y`` edge cylinder of the box ``H``, ``RB``
+    is ``RB (1 + eps)`` at their apex (``eps = +-10^-k``, ``k`` in 1..7), reached at
+    ``s = 0.25`` s: gravity [m/s^2] points out along the edge's diagonal normal, so the arc
+    comes in along it, stops there and goes back. Returns ``(a, v, g, eps)`` in the precision
+    (local frame, m, m/s, m/s^2)."""
+    rng = np.random.default_rng(seed)
     eps = rng.choice([-1.0, 1.0], n) * 10.0 ** -rng.uniform(1, 7, n)
     normal = np.array([SQ2, SQ2, 0.0])
     tangent = np.array([-SQ2, SQ2, 0.0])
@@ -270,30 +271,50 @@ def test_grazing_arcs_are_consistent(precision):
     apex = edge + (RB * (1 + eps))[:, None] * normal
     apex[:, 2] = rng.uniform(-0.2, 0.2, n)
     g = 9.81 * normal
-    s_apex = 0.25
     v_apex = (rng.uniform(-0.2, 0.2, n)[:, None] * tangent
               + rng.uniform(-1, 1, n)[:, None] * np.array([0.0, 0.0, 1.0]))
-    v = v_apex - g * s_apex
-    a = apex - v * s_apex - 0.5 * g * s_apex**2
+    v = v_apex - g * GRAZE_APEX
+    a = apex - v * GRAZE_APEX - 0.5 * g * GRAZE_APEX**2
     a, v, g = (as_precision(x, precision) for x in (a, v, g))
-    hit, s, nrm = local_sweep(H, RB, a, v, g, 0.5, precision)
+    return a, v, g, eps
+
+
+#: When the grazing arcs reach their apex [s]; they span 0.5 s.
+GRAZE_APEX = 0.25
+
+
+def check_edge_grazes(precision, a, v, g, eps, hit, s, nrm, check_normal=False):
+    """The sweep's answers ``hit``, ``s`` [s], ``nrm`` for :func:`edge_graze_arcs`: hits only
+    while moving in, all finite, before the apex; clear misses (``eps`` above the precision's
+    rounding) miss, clear dips hit where the float64 26-feature reference enters, to the
+    position error over the radial speed at the entry [m/s] (a shallow entry's time is that
+    ill-conditioned), and with ``check_normal`` its normal too. Returns how many dips were
+    compared."""
     assert np.isfinite(s).all() and np.isfinite(nrm).all()
     u = v + g * s[:, None]
     assert np.all(np.einsum("ij,ij->i", u[hit == 1], nrm[hit == 1]) < 0.0)
     clear = 1e-3 if precision == "float32" else 1e-9
     assert not hit[eps > clear].any()
     assert hit[eps < -clear].all()
-    assert np.all(s[hit == 1] <= s_apex * (1 + 1e-6))
-    # the clear dips enter where the 26-feature reference does, to the position error over
-    # the radial speed at the entry (a shallow entry's time is that ill-conditioned)
+    assert np.all(s[hit == 1] <= GRAZE_APEX * (1 + 1e-6))
     checked = 0
     for k in np.nonzero(eps < -clear)[0]:
         ref_hit, ref_s, ref_n = arc_contact_by_features(a[k], v[k], g, 0.5, H, RB)
         assert ref_hit
         radial = -np.dot(v[k] + g * ref_s, ref_n)
         assert s[k] == pytest.approx(ref_s, abs=POSITION_REL[precision] * 2.0 / radial)
+        if check_normal:
+            np.testing.assert_allclose(nrm[k], ref_n, atol=NORMAL_TOL[precision] * 2.0 / radial)
         checked += 1
-    assert checked >= 50  # of the ~200 dips, those clear of rounding (|eps| > clear)
+    return checked
+
+
+def test_grazing_arcs_are_consistent(precision):
+    """Arcs whose closest approach to an edge cylinder is R (1 +- 10^-k), at their apex
+    (:func:`edge_graze_arcs`), through the sweep kernel: :func:`check_edge_grazes`."""
+    a, v, g, eps = edge_graze_arcs(400, precision)
+    hit, s, nrm = local_sweep(H, RB, a, v, g, 0.5, precision)
+    assert check_edge_grazes(precision, a, v, g, eps, hit, s, nrm) >= 50  # of ~200 dips
 
 
 # --- against the reference -------------------------------------------------------------------
