@@ -180,6 +180,18 @@ def named_arcs():
         # inside the core box moving out, gravity out too: no hit
         "inside, moving out": ([0.0, 0.25, 0.0], [0, 3, 0], [0, 1, 0], 1.0, H, RB,
                                0, None, None),
+        # tau 0 never hits, not even from the surface moving in
+        "tau 0, on the face moving in": ([0.25, TOP, 0.0], [1, -1, 0], G, 0.0, H, RB,
+                                         0, None, None),
+        # at rest on the bottom face (v . n = 0 with |v| = 0), gravity pulling away: no hit
+        "under the bottom at rest, gravity away": ([0.25, -TOP, 0.0], [0, 0, 0], G, 1.0,
+                                                   H, RB, 0, None, None),
+        # leaving a wall with gravity along it (g . n = 0): it never comes back
+        "on a wall leaving, gravity along": ([1.0 + RB, 0.0, 0.0], [2, 0, 0], G, 1.0, H, RB,
+                                             0, None, None),
+        # thrown onto the +x face plane x = 1.5 of a sharp box, no gravity along x
+        "sharp box, +x face": ([3.5, 0.25, 0.0], [-4, 0.5, 0], [0, -2, 0], 1.0,
+                               [1.5, 0.5, 0.25], 0.0, 1, 0.5, [1, 0, 0]),
     }
     s_star = 0.375
     for name, point, normal, u, g in FEATURE_CASES:
