@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 import warp as wp
 from arc_reference import arc_contact_by_features, arc_point, signed_distance
+from helpers import shaped_half_extents
 from test_arc_face_after_edge import BIG_R, TAU, falling_root, posed
 from test_arc_face_after_edge import CASES as FACE_AFTER_EDGE
 from test_arc_sweep import (
@@ -184,6 +185,18 @@ def named_arcs():
         # inside the core box moving out, gravity out too: no hit
         "inside, moving out": ([0.0, 0.25, 0.0], [0, 3, 0], [0, 1, 0], 1.0, H, RB,
                                0, None, None),
+        # tau 0 never hits, not even from the surface moving in
+        "tau 0, on the face moving in": ([0.25, TOP, 0.0], [1, -1, 0], G, 0.0, H, RB,
+                                         0, None, None),
+        # at rest on the bottom face (v . n = 0 with |v| = 0), gravity pulling away: no hit
+        "under the bottom at rest, gravity away": ([0.25, -TOP, 0.0], [0, 0, 0], G, 1.0,
+                                                   H, RB, 0, None, None),
+        # leaving a wall with gravity along it (g . n = 0): it never comes back
+        "on a wall leaving, gravity along": ([1.0 + RB, 0.0, 0.0], [2, 0, 0], G, 1.0, H, RB,
+                                             0, None, None),
+        # thrown onto the +x face plane x = 1.5 of a sharp box, no gravity along x
+        "sharp box, +x face": ([3.5, 0.25, 0.0], [-4, 0.5, 0], [0, -2, 0], 1.0,
+                               [1.5, 0.5, 0.25], 0.0, 1, 0.5, [1, 0, 0]),
     }
     s_star = 0.375
     for name, point, normal, u, g in FEATURE_CASES:
@@ -557,3 +570,65 @@ def test_root_polish_stays_in_its_bracket(precision):
         real = [r.real for r in f.roots() if abs(r.imag) < 1e-9 and lo <= r.real <= hi]
         assert len(real) == 1, name
         assert root[k] == pytest.approx(real[0], abs=1e-12 * (hi - lo)), name
+
+
+def axis_gravity_case(rng, kind):
+    """An arc built backwards from a chosen contact on a rounded box (as ``contact_case``),
+    with gravity along one local axis, as for a box not rotated against gravity: the other two
+    coordinates are linear in ``s``, and their slab crossings are the linear roots."""
+    h = shaped_half_extents(rng, kind, 0.1, 1.0)
+    radius = rng.choice([0.05, 0.3]) if kind != "point" else rng.uniform(0.1, 0.5)
+    g = np.zeros(3)
+    g[rng.integers(3)] = rng.choice([-9.81, 9.81])
+    y = rng.uniform(-2.0, 2.0, 3) * (h + radius + 0.1)
+    core = np.clip(y, -h, h)
+    if np.linalg.norm(y - core) == 0.0:
+        return None
+    normal = (y - core) / np.linalg.norm(y - core)
+    point = core + radius * normal
+    tau = rng.uniform(0.5, 1.0)
+    s_star = tau * rng.uniform(0.2, 0.6)
+    u = rng.normal(0.0, 1.0, 3)
+    u -= (np.dot(u, normal) + rng.uniform(0.1, 2.0)) * normal  # going in
+    if -np.dot(u, normal) / np.linalg.norm(u) < 2.0 * STEEP:
+        return None
+    gn, un = np.dot(g, normal), np.dot(u, normal)
+    if gn < 0.0 and s_star >= 2.0 * abs(un) / abs(gn):
+        return None
+    a, v = built_backwards(point, normal, u, s_star, g)
+    return h, radius, a, v, g, tau
+
+
+def test_arcs_with_gravity_along_an_axis_match_the_reference(precision):
+    """Arcs under gravity along one local axis (two coordinates moving linearly, each crossing
+    its core slab's planes once at most) onto faces, edges and corners of rounded boxes: the
+    contact point [m] and normal of the float64 26-feature reference."""
+    rng = np.random.default_rng(23)
+    kinds = ["box", "plate", "stick", "point", "cube"]
+    cases = []
+    while len(cases) < 100:
+        case = axis_gravity_case(rng, kinds[len(cases) % len(kinds)])
+        if case is None:
+            continue
+        h, radius, a, v, g, tau = case
+        a, v, h = (as_precision(x, precision) for x in (a, v, h))
+        radius = float(as_precision(radius, precision))
+        if signed_distance(a, h, radius) > 0.05:
+            cases.append((a, v, g, tau, h, radius))
+    cols = [np.array([np.asarray(c[k], float) for c in cases]) for k in range(6)]
+    out = run_arcs(precision, *cols)
+    checked = 0
+    for k, (a, v, g, tau, h, radius) in enumerate(cases):
+        ref_hit, ref_s, ref_n = arc_contact_by_features(a, v, g, tau, h, radius)
+        assert ref_hit, k
+        u = v + g * ref_s
+        steep = -np.dot(u, ref_n) / np.linalg.norm(u)
+        if steep < STEEP:
+            continue
+        scale = max(np.abs(a).max(), h.max() + radius)
+        assert out["hit"][k] == 1, k
+        np.testing.assert_allclose(arc_point(a, v, g, out["s"][k]), arc_point(a, v, g, ref_s),
+                                   atol=POSITION_REL[precision] * scale / steep)
+        np.testing.assert_allclose(out["normal"][k], ref_n, atol=NORMAL_TOL[precision] / steep)
+        checked += 1
+    assert checked >= 80
