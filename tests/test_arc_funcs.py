@@ -632,3 +632,31 @@ def test_arcs_with_gravity_along_an_axis_match_the_reference(precision):
         np.testing.assert_allclose(out["normal"][k], ref_n, atol=NORMAL_TOL[precision] / steep)
         checked += 1
     assert checked >= 80
+
+
+@pytest.mark.parametrize("length, time", [(2.0**-10, 1.0), (2.0**10, 1.0), (1.0, 2.0**-6),
+                                          (1.0, 2.0**6), (2.0**10, 2.0**-6)],
+                         ids=["mm", "km", "short time", "long time", "km, short time"])
+def test_named_arcs_at_other_scales(precision, length, time):
+    """The named arcs with lengths scaled by ``length`` (positions, half extents, radii [m])
+    and times by ``time`` (``tau`` and contact times [s]; velocities by ``length / time``,
+    accelerations by ``length / time^2``): powers of two, so every input and closed form
+    scales exactly, and the answers scale with them (the normals unchanged). The sweep's
+    margins (touch, root, tangent, gravity, sharpness) are relative to the local scale, the
+    span and the speeds, so nothing else may change."""
+    rows = list(NAMED.values())
+    cols = [np.array([np.asarray(r[k], float) for r in rows]) for k in range(6)]
+    a, v, g, tau, h, radius = cols
+    out = run_arcs(precision, a * length, v * (length / time), g * (length / time**2),
+                   tau * time, h * length, radius * length)
+    s_tol = {"float32": 4e-6, "float64": 1e-13}[precision]
+    for k, (name, row) in enumerate(NAMED.items()):
+        hit, s, normal = row[6:]
+        span = float(as_precision(row[3] * time, precision))
+        assert out["hit"][k] == hit, name
+        if hit:
+            assert out["s"][k] == pytest.approx(s * time, abs=s_tol * max(time, span)), name
+            np.testing.assert_allclose(out["normal"][k], normal, atol=NORMAL_TOL[precision],
+                                       err_msg=name)
+        else:
+            assert out["s"][k] == span, name
