@@ -40,7 +40,7 @@ import warp as wp
 from .arc import arc_funcs
 from .contact import contact_funcs
 from .data import Features, model_structs
-from .nearest import SEPARATION_ULPS
+from .nearest import nearest_funcs
 from .nearest_arc import model_nearest_hit_arc, nearest_arc_funcs
 from .precision import precision
 from .slide import LEG_DETACH, LEG_END, LEG_REGION, SHARP_SLIDE_ULPS, slide_funcs
@@ -83,6 +83,7 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
     nearest_hit_arc = model_nearest_hit_arc(p, features.broad_phase)
     arc_contact_centre = nearest_arc_funcs(p).arc_contact_centre
     arc_point = arc_funcs(p).arc_point
+    separation_lift = nearest_funcs(p).separation_lift
     on_contact = contact_funcs(p, features.spin, features.lossy, features.events)
     slide = slide_funcs(p, features.broad_phase)
     face_exit, feature_of, normal_force = slide.face_exit, slide.feature_of, slide.normal_force
@@ -93,7 +94,6 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
     ONE = scalar(1.0)
     TWO = scalar(2.0)
     RESTING = scalar(RESTING_SPEED)
-    SEPARATION = scalar(SEPARATION_ULPS * p.eps)
     EIGHT = scalar(8.0)
     COPLANAR = scalar(1.0 - COPLANAR_REL)
     TANGENT_REL = scalar(p.tangent_rel)
@@ -124,18 +124,14 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         return axis, side
 
     @wp.func
-    def inf_norm(x: vec3):
-        return wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2]))
-
-    @wp.func
     def resting(g: vec3, n: vec3, un: scalar, a: vec3, leg: vec3, big_r: scalar,
                 extent: vec3):
         """Whether a contact (unit normal ``n``, normal speed ``un`` [m/s], from the leg that
         started at ``a`` [m] and moved by ``leg`` [m], Minkowski radius ``big_r`` [m], box
         half extent ``extent`` [m]) is a support: gravity presses the sphere onto the surface
         and its normal speed is at most ``RESTING_SPEED``, or, where the contact centre is
-        moved out by the separation lift (``nearest.separate``: a Minkowski radius below
-        ``SEPARATION_ULPS`` ulps of the scale), at most the speed of a fall from four times
+        moved out by the separation lift (``nearest.separation_lift`` of the leg's start, the
+        leg and the box: a Minkowski radius below it), at most the speed of a fall from four times
         that lift, ``sqrt(8 |g . n| lift)``: a sphere resting on a sharp face (a point on a
         plate) starts each frame one or two lifts above it, and its fall is no bounce (as a
         bounce each would add a lift of height: a ratchet)."""
@@ -143,7 +139,7 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         out = int(0)
         if gn < -TANGENT_REL * wp.length(g):
             limit = RESTING
-            lift = SEPARATION * wp.max(wp.max(inf_norm(a), inf_norm(leg)), inf_norm(extent))
+            lift = separation_lift(a, leg, extent)
             if big_r < TWO * lift:
                 limit = wp.max(limit, wp.sqrt(EIGHT * -gn * lift))
             if -un <= limit:

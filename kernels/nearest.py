@@ -53,11 +53,16 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         return wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2]))
 
     @wp.func
+    def separation_lift(x: vec3, travel: vec3, extent: vec3):
+        """``SEPARATION_ULPS`` ulps [m] of the scale of a contact's computation: the point
+        ``x`` [m], the path ``travel`` [m] it came along, the box's half extent [m]."""
+        return SEPARATION * wp.max(wp.max(inf_norm(x), inf_norm(travel)), inf_norm(extent))
+
+    @wp.func
     def separate(contact: vec3, travel: vec3, normal: vec3, big_r: scalar, extent: vec3):
-        """``contact`` moved out along the unit ``normal`` by ``SEPARATION_ULPS`` ulps of the
-        computation's scale (``|contact|``, the path ``travel`` it came along, the box's size)
-        when the Minkowski radius ``big_r`` is below that: else bit for bit."""
-        lift = SEPARATION * wp.max(wp.max(inf_norm(contact), inf_norm(travel)), inf_norm(extent))
+        """``contact`` moved out along the unit ``normal`` by :func:`separation_lift` when the
+        Minkowski radius ``big_r`` is below it: else bit for bit."""
+        lift = separation_lift(contact, travel, extent)
         out = contact
         if big_r < lift:
             out = contact + lift * normal
@@ -101,6 +106,7 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         return sweep_box(q.a, q.v, q.r, center, rotation, half_extents, box_radius)
 
     return SimpleNamespace(chord_path=chord_path, sweep_chord=sweep_chord,
+                           separation_lift=separation_lift,
                            contact_centre=contact_centre, separate=separate)
 
 
