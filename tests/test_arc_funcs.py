@@ -33,6 +33,7 @@ from test_arc_sweep import (
     closest_approach,
     contact_case,
     edge_graze_arcs,
+    entering_arc,
     random_case,
 )
 
@@ -588,15 +589,8 @@ def axis_gravity_case(rng, kind):
     point = core + radius * normal
     tau = rng.uniform(0.5, 1.0)
     s_star = tau * rng.uniform(0.2, 0.6)
-    u = rng.normal(0.0, 1.0, 3)
-    u -= (np.dot(u, normal) + rng.uniform(0.1, 2.0)) * normal  # going in
-    if -np.dot(u, normal) / np.linalg.norm(u) < 2.0 * STEEP:
-        return None
-    gn, un = np.dot(g, normal), np.dot(u, normal)
-    if gn < 0.0 and s_star >= 2.0 * abs(un) / abs(gn):
-        return None
-    a, v = built_backwards(point, normal, u, s_star, g)
-    return h, radius, a, v, g, tau
+    arc = entering_arc(rng, point, normal, g, s_star)
+    return None if arc is None else (h, radius, *arc, g, tau)
 
 
 def test_arcs_with_gravity_along_an_axis_match_the_reference(precision):

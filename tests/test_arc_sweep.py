@@ -368,6 +368,15 @@ def contact_case(rng, kind):
     point = core + radius * normal
     tau = rng.uniform(0.2, 1.0)
     s_star = tau * rng.uniform(0.2, 0.9)
+    arc = entering_arc(rng, point, normal, g, s_star)
+    return None if arc is None else (h, radius, *arc, g, tau)
+
+
+def entering_arc(rng, point, normal, g, s_star):
+    """``(a, v)`` of an arc under ``g`` [m/s^2] built backwards from entering the surface at
+    ``point`` [m] (outward unit ``normal``) at ``s_star`` [s] with a random velocity at least
+    ``2 STEEP`` steep, or None when that is too shallow or an earlier contact is possible (see
+    :func:`contact_case`)."""
     u = rng.normal(0.0, 1.0, 3)
     u -= (np.dot(u, normal) + rng.uniform(0.1, 2.0)) * normal  # going in
     if -np.dot(u, normal) / np.linalg.norm(u) < 2.0 * STEEP:
@@ -375,8 +384,7 @@ def contact_case(rng, kind):
     gn, un = np.dot(g, normal), np.dot(u, normal)
     if gn < 0.0 and s_star >= 2.0 * abs(un) / abs(gn):
         return None
-    a, v = built_backwards(point, normal, u, s_star, g)
-    return h, radius, a, v, g, tau
+    return built_backwards(point, normal, u, s_star, g)
 
 
 @pytest.mark.slow
