@@ -25,7 +25,9 @@ distance ``R`` of the core box ``[-h, h]``. Each coordinate is a quadratic in ``
 Starts in contact use the same margin as the linear sweep (``TANGENT_REL``); an arc that starts
 on the surface moving along it while gravity pulls it in goes in at once (a hit at ``s = 0``), and
 one moving away with gravity pulling it back is searched for its return from half the time it
-takes to come back to the tangent plane (the convex body lies behind that plane until then).
+takes to come back to the tangent plane (the convex body lies behind that plane until then),
+unless its outward speed could not lift it out of the touch band (rounding of the velocity, or
+of the normal far from the origin): that one goes in at once too.
 """
 
 
@@ -489,6 +491,41 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
         return hit, s_hit, normal
 
     @wp.func
+    def held_within_rounding(a: vec3, v: vec3, h: vec3, radius: scalar, dist0: scalar,
+                             vn: scalar, gn: scalar, slack: scalar):
+        """1 when a start within the touch band of the surface (signed distance ``dist0`` [m],
+        ``|dist0| <= slack``) that moves away from it (normal speed ``vn > 0`` [m/s]) with
+        gravity pressing (``gn < 0`` [m/s^2]) cannot rise above the band, so that its outward
+        speed is the rounding of the velocity or of the normal, not a hop.
+
+        Relative to the surface the centre's height is ``dist0 + vn s + 1/2 k s^2``: on a face
+        ``k = gn``; on an edge's or a corner's curved part (``a`` outside two or three core
+        slabs), which falls away under the tangential motion, ``k = gn + |v_t|^2 / R`` (``v_t``
+        the velocity across the edge's axis less its normal part; all of it on a corner).
+        When ``k < 0`` its highest point is ``dist0 + vn^2 / (2 |k|)``; at most ``slack``
+        above the surface, the arc never leaves the band and goes into the body at once
+        (a start just inside, rising too slowly to get out, has no crossing to return
+        through: a sphere slowly sliding on a nearly level face, or on a curve far from the
+        origin, where a position's rounding turns the normal by ``ulp / R``).
+        """
+        out = int(0)
+        count = int(0)
+        v_perp = v
+        for i in range(3):
+            if wp.abs(a[i]) > h[i]:
+                count += 1
+            else:
+                v_perp[i] = ZERO
+        k = gn
+        if count >= 2:
+            k = ONE  # a point's edge or corner (R = 0): no curvature to hold it
+            if radius > ZERO:
+                k = gn + wp.max(wp.dot(v_perp, v_perp) - vn * vn, ZERO) / radius
+        if k < ZERO and dist0 + vn * vn / (-TWO * k) <= slack:
+            out = 1
+        return out
+
+    @wp.func
     def sweep_rounded_box_arc(a: vec3, v: vec3, g: vec3, tau: scalar, h: vec3, radius: scalar):
         """First contact of the arc ``x(s) = a + v s + 1/2 g s^2``, ``s`` in [0, tau], with a
         rounded box.
@@ -505,7 +542,9 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
               (``v . n < -TANGENT_REL |v|``), or when it moves along (``|v . n| <= TANGENT_REL
               |v|``) while gravity pulls it in (``g . n < -TANGENT_REL |g|``): the arc then goes
               in at once. Moving away from the surface with gravity pulling it back, the return
-              is searched for; otherwise (or from inside the body moving out) no hit.
+              is searched for, except when it could not rise out of the touch band
+              (``held_within_rounding``: an outward speed that is rounding): a hit at ``s =
+              0``. Otherwise (or from inside the body moving out) no hit.
             * ``g = 0``: the linear sweep of the chord ``a -> a + v tau`` (``s = t tau``).
             * ``tau <= 0`` or a motionless arc never hits.
             * A Minkowski radius below ``SHARP_REL`` of the local scale is a sharp box: the
@@ -562,6 +601,8 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
                 vn = wp.dot(v, n0)
                 gn = wp.dot(g, n0)
                 speed = wp.length(v)
+                if speed == ZERO:
+                    vn = ZERO  # |v|^2 underflowed (a speed near 1e-154 m/s or below): no motion
                 if vn < -TANGENT_REL * speed:
                     hit = 1
                     s_hit = ZERO
@@ -572,11 +613,18 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
                         s_hit = ZERO
                         normal = n0
                 elif gn < ZERO and dist0 >= -TOUCH_REL * scale:
-                    # on the surface moving away: the convex body stays behind the tangent plane
-                    # until the arc comes back to it, at -2 vn / gn
-                    s_from = -vn / gn
-                    if s_from < tau:
-                        search = 1
+                    if held_within_rounding(a, v, h, radius, dist0, vn, gn, slack) == 1:
+                        # "moving away" only by rounding: it never rises out of the touch
+                        # band, and goes in at once
+                        hit = 1
+                        s_hit = ZERO
+                        normal = n0
+                    else:
+                        # on the surface moving away: the convex body stays behind the tangent
+                        # plane until the arc comes back to it, at -2 vn / gn
+                        s_from = -vn / gn
+                        if s_from < tau:
+                            search = 1
             if search == 1:
                 sharp = radius <= SHARP_REL * scale
                 for _attempt in range(MAX_SHARP_ENTRIES):

@@ -106,6 +106,18 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         return x - wp.dot(x, n) * n
 
     @wp.func
+    def along_face(x: vec3, boxes: Boxes, k: int, axis: int):
+        """``x`` (world) without its component along box ``k``'s local ``axis``, that
+        component zeroed in the box's frame: its part along the face normal, seen again from
+        the box's frame (as the sweeps see it), is the rounding of ``x`` itself. (``x - (x .
+        n) n`` leaves the rounding of the removed part, which for gravity on a nearly level
+        face, ``|g . n| >> |g_t|``, was larger than the tangent margin of ``g_t``: a sphere at
+        rest there was stopped by its own face at every leg, capped every frame.)"""
+        xl = wp.transpose(boxes.rotation[k]) * x
+        xl[axis] = ZERO
+        return boxes.rotation[k] * xl
+
+    @wp.func
     def box_frame(boxes: Boxes, k: int, x: vec3, v: vec3, g: vec3):
         """Point ``x`` [m], velocity ``v`` and acceleration ``g`` in box ``k``'s frame."""
         to_local = wp.transpose(boxes.rotation[k])
@@ -338,8 +350,8 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
             st.face_side = sig[axis]
             st.supports = 1
             st.n1 = n_w
-            st.g_eff = along_plane(g, n_w)
-            v = along_plane(v, n_w)
+            st.g_eff = along_face(g, boxes, st.box, axis)
+            v = along_face(v, boxes, st.box, axis)
         else:
             st.mode = CURVED
             st.supports = 0
@@ -384,8 +396,8 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                 out.face_side = side
                 out.supports = 1
                 out.n1 = n
-                out.g_eff = along_plane(g, n)
-                u = along_plane(u, n)
+                out.g_eff = along_face(g, boxes, box, axis)
+                u = along_face(u, boxes, box, axis)
             elif holds_on(xl, vl, gl, h, big_r, f_mask, f_sig) == 1:
                 held = 1
                 out.mode = CURVED

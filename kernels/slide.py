@@ -44,9 +44,10 @@ from types import SimpleNamespace
 
 import warp as wp
 
-from .arc import arc_funcs
+from .arc import TOUCH_ULPS, arc_funcs
 from .candidates import bounds_funcs, candidate_funcs
 from .data import model_structs
+from .nearest import nearest_funcs
 from .nearest_arc import nearest_arc_funcs
 from .precision import Precision
 
@@ -107,6 +108,9 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
     ANGLE = scalar(SLIDE_ANGLE_STEP)
     REFINE_TOL = scalar(REFINE_ULPS * p.eps)
     BORDER_REL = scalar(FACE_BORDER_ULPS * p.eps)
+    TOUCH_REL = scalar(TOUCH_ULPS * p.eps)
+    mat33 = p.mat33
+    separation_lift = nearest_funcs(p).separation_lift
 
     @wp.func
     def first_crossing(c0: scalar, c1: scalar, c2: scalar, bound: scalar, tau: scalar):
@@ -320,6 +324,33 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
                     best, best_s, best_n = candidate(q, boxes, k, best, best_s, best_n)
         return best, best_s, best_n
 
+    @wp.func
+    def kept_on_the_curve(a: vec3, center: vec3, to_local: mat33, rotation: mat33, h: vec3,
+                          radius: scalar, cf: vec3, mask: vec3):
+        """The end ``a`` [m, world] of a curved leg, put back out of the curve when the world
+        coordinates' rounding left it inside by more than the sweeps' touch band.
+
+        The leg ends on the surface in the box's frame; far from the origin the world centre
+        ``center + rotation x`` rounds to ulps of its coordinates, which can be far more than
+        the band the arc sweep's start rules take as *on* the surface (``arc.TOUCH_ULPS`` of
+        the local scale; at 3 km, 1e-13 m against 4e-15 m), and a start deeper than that moving
+        out by rounding would be taken as leaving from inside. Such an end is moved out along
+        the normal to ``SEPARATION_ULPS`` of its coordinates above the surface
+        (``nearest.separation_lift``; the next sweep finds the entry just after); within the
+        band (always, near the origin) it stays bit for bit.
+        """
+        x = to_local * (a - center)
+        w = wp.cw_mul(mask, x - cf)
+        size = wp.length(w)
+        scale = wp.max(wp.max(wp.max(h[0], h[1]), h[2]) + radius,
+                       wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2])))
+        depth = radius - size
+        out = a
+        if size > ZERO and depth > TOUCH_REL * scale:
+            lift = separation_lift(a, vec3(ZERO, ZERO, ZERO), h)
+            out = a + (depth + lift) * (rotation * (w / size))
+        return out
+
     @wp.func(inline=False)
     def curved_leg(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, boxes: Boxes,
                    broad: BroadPhase, box: int, mask: vec3, sig: vec3):
@@ -439,6 +470,7 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
                 a = center + rotation * (cf + w + xf_end)
                 v = rotation * (u + vf_end)
         n_out = rotation * (w / radius)
+        a = kept_on_the_curve(a, center, to_local, rotation, h, radius, cf, mask)
         return kind, elapsed, a, v, new_mask, new_sig, hit_box, hit_n, n_out
 
     return SimpleNamespace(first_crossing=first_crossing, face_exit=face_exit,

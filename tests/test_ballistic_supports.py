@@ -20,9 +20,13 @@ compares with the exact frictionless motion, over step sizes from 1/960 s to 0.4
 import numpy as np
 import pytest
 import support_analytic as sa
+from helpers import examples
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_ballistic_path import GRAVITY, MAX_BOUNCES, run
 
 import warpsim as ws
+from warpsim.analysis import reference
 
 #: float64 agreement [m] of face slides and leaving them with the piecewise parabolas: each
 #: exit is a quadratic root, so only rounding of metre-sized coordinates remains (the issue's
@@ -397,3 +401,91 @@ def test_curved_slide_meets_the_next_box_with_every_broad_phase():
         finals.append(state.position)
     for other in finals[1:]:
         np.testing.assert_array_equal(other, finals[0])
+
+
+# -- random slides on random rotated boxes, against the exact reference -------------------------
+
+#: Distance [m] from the Minkowski surface within which a reference sample is on the box (a
+#: support): the reference keeps a slide on the surface to ~1e-13 m, and a flight leaves it at
+#: once (``test_reference_supports.LIFT_GAP`` is 1e-11 m).
+ON_SURFACE = 1e-9
+
+#: Samples of the reference per frame checked on the way: the frame ends (the kernel's states).
+SLIDE_SECONDS = 0.6
+
+
+def box_gap(box, x):
+    """The centre's distance [m] from the core box of ``box`` (one box), and whether its
+    nearest core point is on the top (+y local) face's interior (a face support) or not (an
+    edge or a corner: a curved one), for positions ``x`` (T, 3)."""
+    rot = box.rotation_matrices()[0].astype(float)
+    h = np.asarray(box.half_extents[0], float)
+    local = (x - np.asarray(box.center[0], float)) @ rot
+    nearest = np.clip(local, -h, h)
+    gap = np.linalg.norm(local - nearest, axis=1)
+    on_face = (np.abs(local[:, 0]) < h[0]) & (np.abs(local[:, 2]) < h[2]) & (local[:, 1] > h[1])
+    return gap, on_face
+
+
+@settings(max_examples=examples(24))
+@given(half=st.tuples(st.floats(0.2, 1.5), st.floats(0.1, 1.0), st.floats(0.2, 1.5)),
+       rb=st.sampled_from([0.0, 0.0, 0.03, 0.12]), r=st.sampled_from([0.05, 0.1, 0.2]),
+       tilt=st.floats(0.0, 0.6), tilt_axis=st.floats(0.0, 2 * np.pi),
+       yaw=st.floats(0.0, 2 * np.pi), start=st.tuples(st.floats(-0.9, 0.9), st.floats(-0.9, 0.9)),
+       speed=st.floats(0.0, 3.0), heading=st.floats(0.0, 2 * np.pi),
+       far=st.sampled_from([0.0, 0.0, 3.0e3]), dt=st.sampled_from(DTS))
+def test_random_slides_on_rotated_boxes_match_the_reference(half, rb, r, tilt, tilt_axis, yaw,
+                                                             start, speed, heading, far, dt):
+    """A sphere put on the top face of a box turned about the vertical and tilted up to 34
+    degrees about a random horizontal axis (sharp or rounded, at the origin or 3 km away),
+    sliding in a random direction at up to 3 m/s: the kernel's states at the frame ends, float64,
+    against the exact reference (``warpsim.analysis.reference``, written independently) at the
+    same times. While the sphere is on the face or has left it into free flight the motion is
+    piecewise parabolas with exact breaks: 1e-9 m (``FACE_TOL``), at any ``dt``; once it has
+    ridden an edge or a corner (a curved slide), the curved bounds (``CURVED_TOL``)."""
+    tilt_q = quat_about((np.cos(tilt_axis), 0.0, np.sin(tilt_axis)), tilt)
+    q = quat_mul(tilt_q, quat_about((0, 1, 0), yaw))
+    shift = np.array([far, -0.3 * far, 0.6 * far])
+    box = one_box(shift, half, q, rb)
+    rot = box.rotation_matrices()[0].astype(float)
+    h = np.array(half, float)
+    x0 = shift + rot @ np.array([start[0] * h[0], h[1] + rb + r, start[1] * h[2]])
+    v0 = rot @ (speed * np.array([np.cos(heading), 0.0, np.sin(heading)]))
+    frames = frames_for(SLIDE_SECONDS, dt)
+    times = dt * np.arange(1, frames + 1)
+    scene = ws.Scene(box, gravity=G)
+    truth = reference.simulate(scene, ws.Swarm(position=[x0], velocity=[v0], radius=r),
+                               float(times[-1]), times)
+    assert not truth.incomplete.any()
+    assert not len(truth.events.of_sphere(0).bounces())
+    out = run(box, x0[None], v0[None], frames, dt, "float64", radius=r, record=True)
+    assert out["capped"].sum() == 0
+    got = out["history"][:, 0]
+    want = truth.position[:, 0]
+    gap, on_face = box_gap(box, want)
+    curved = (np.abs(gap - (rb + r)) < ON_SURFACE) & ~on_face
+    tol = np.where(np.maximum.accumulate(curved), CURVED_TOL[dt], FACE_TOL["float64"])
+    err = np.linalg.norm(got - want, axis=1)
+    assert np.all(err <= tol), (err.max(), int(np.argmax(err > tol)), curved.any())
+
+
+@pytest.mark.parametrize("dt", [1 / 960, 1 / 60], ids=["dt960", "dt60"])
+@pytest.mark.parametrize("tilt", [6.103515625e-05, 1e-4, 1e-3, 1e-2])
+def test_release_on_a_nearly_level_face(tilt, dt):
+    """At rest on a sharp box's top face tilted by ``tilt`` [rad]: the slide down the slope,
+    ``1/2 g sin(tilt) t^2``, to 1e-9 m after 0.25 s, one support a frame, never capped, never
+    below the face. (Gravity's part along such a face is ``1e-4`` of its normal part; projected
+    in the world frame it kept that part's rounding, which the face's own sweep took as gravity
+    pulling the sphere in: stopped at every leg, capped every frame, or through the face.)"""
+    r = 0.05
+    box = one_box(np.zeros(3), (1.0, 1.0, 1.0), quat_about((1, 0, 0), tilt), 0.0)
+    rot = box.rotation_matrices()[0].astype(float)
+    x0 = rot @ np.array([0.0, 1.0 + r, 0.0])
+    frames = frames_for(0.25, dt)
+    out = run(box, x0[None], np.zeros((1, 3)), frames, dt, "float64", radius=r, record=True)
+    t = frames * dt
+    downhill = rot @ np.array([0.0, 0.0, 1.0])  # the +z face direction tilts down for tilt > 0
+    want = x0 + 0.5 * GRAVITY * np.sin(tilt) * t * t * downhill
+    np.testing.assert_allclose(out["position"][0], want, rtol=0, atol=1e-9)
+    assert out["capped"].sum() == 0 and out["supported"][0] == frames
+    assert box.signed_distance(out["history"][:, 0]).min() >= r - 1e-12
