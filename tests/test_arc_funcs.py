@@ -198,6 +198,21 @@ def named_arcs():
         # thrown onto the +x face plane x = 1.5 of a sharp box, no gravity along x
         "sharp box, +x face": ([3.5, 0.25, 0.0], [-4, 0.5, 0], [0, -2, 0], 1.0,
                                [1.5, 0.5, 0.25], 0.0, 1, 0.5, [1, 0, 0]),
+        # weak gravity (|g| < sqrt 2, where the vertex's s_v^2 g / 2 and s_v / (g / 2) differ
+        # in sign): y = -3/2 + 2^-9 + s - s^2 / 2, apex 2^-9 above the bottom plane y = -1 at
+        # s = 1, back below it at tau = 2; in at (1 - s)^2 = 2^-8
+        "weak gravity, apex dips into the bottom face": ([0.25, -1.5 + 2.0**-9, 0.0],
+                                                         [0.5, 1, 0], [0, -1, 0], 2.0, H, RB,
+                                                         1, 1.0 - 2.0**-4, [0, -1, 0]),
+        # moving straight in at 2^-24 m/s (in at any speed: v . n = -|v|), gravity away
+        "on the face creeping in, gravity away": ([0.25, TOP, 0.0], [0, -(2.0**-24), 0],
+                                                  [0, 8, 0], 1.0, H, RB, 1, 0.0, [0, 1, 0]),
+        # 2^-45 m inside the top face of a box 64 m long (the local scale 64.5 m): on the
+        # surface, within 16 ulps of the scale; leaving at 2 m/s under g = -8, back at
+        # y = 1: 4 s^2 - 2 s + 2^-45 = 0
+        "2^-45 inside a long box's face, leaving, comes back": (
+            [0.25, TOP - 2.0**-45, 0.0], [0.25, 2, 0], [0, -8, 0], 1.0, [64.0, 0.5, 0.25], RB,
+            1, (2.0 + np.sqrt(4.0 - 2.0**-41)) / 8.0, [0, 1, 0]),
     }
     s_star = 0.375
     for name, point, normal, u, g in FEATURE_CASES:
@@ -654,3 +669,36 @@ def test_named_arcs_at_other_scales(precision, length, time):
                                        err_msg=name)
         else:
             assert out["s"][k] == span, name
+
+
+def test_sharpness_threshold_against_the_local_scale(precision):
+    """A box is sharp when ``R <= SHARP_REL * scale``, the scale being the largest of the
+    grown half extents and ``|a|``: its entry through an edge region is the grown-box entry,
+    with the normal of the face crossed last (a rounded one walks on to the edge's capsule or
+    the other face, a normal tilted or turned). ``R = 64 eps``, boxes ``1/8`` m half wide, the
+    arcs entering beside an edge, 16 eps of time between the two faces' planes: sharp only
+    through one half extent 8 m long, or through a start 7.125 m out along one axis (that
+    axis's face crossed last, at 16 m/s); the scale without that component is about 1 m.
+    Gravity 1 m/s^2 along the axis that stays inside its slab. Positions [m], times [s]."""
+    eps = float(np.finfo(types_of(precision).np_dtype).eps)
+    rows = []  # (a, v, g, h, normal); every entry at s = 7/16 - 16 eps
+    for axis in range(3):
+        first, last = [k for k in range(3) if k != axis]
+        a, v, g, h = np.zeros(3), np.zeros(3), np.zeros(3), np.full(3, 0.125)
+        h[axis] = 8.0
+        a[[first, last]] = 1.0, 1.0 + 32 * eps
+        v[[first, last]] = -2.0
+        g[axis] = -1.0
+        rows.append((a, v, g, h, np.eye(3)[last]))
+        first, still = (axis + 1) % 3, (axis + 2) % 3
+        a, v, g, h = np.zeros(3), np.zeros(3), np.zeros(3), np.full(3, 0.125)
+        a[[axis, first]] = 7.125 - 192 * eps, 1.0
+        v[[axis, first]] = -16.0, -2.0
+        g[still] = -1.0
+        rows.append((a, v, g, h, np.eye(3)[axis]))
+    a, v, g, h, normals = (np.array([r[k] for r in rows]) for k in range(5))
+    out = run_arcs(precision, a, v, g, 1.0, h, 64 * eps)
+    for k, normal in enumerate(normals):
+        assert out["hit"][k] == 1, k
+        assert out["s"][k] == pytest.approx(0.4375 - 16 * eps, abs=4 * eps), k
+        np.testing.assert_array_equal(out["normal"][k], normal, err_msg=str(k))
