@@ -739,8 +739,8 @@ def test_named_arcs_at_other_scales(precision, length, time):
 def test_sharpness_threshold_against_the_local_scale(precision):
     """A box is sharp when ``R <= SHARP_REL * scale``, the scale being the largest of the
     grown half extents and ``|a|``: its entry through an edge region is the grown-box entry,
-    with the normal of the face crossed last (a rounded one walks on to the edge's capsule or
-    the other face, a normal tilted or turned). ``R = 64 eps``, boxes ``1/8`` m half wide, the
+    with the normal of the face crossed last (a rounded one walks on to the edge's capsule, a
+    tilted normal). ``R = 64 eps``, boxes ``1/8`` m half wide, the
     arcs entering beside an edge, 16 eps of time between the two faces' planes: sharp only
     through one half extent 8 m long, or through a start 7.125 m out along one axis (that
     axis's face crossed last, at 16 m/s); the scale without that component is about 1 m.
