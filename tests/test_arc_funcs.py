@@ -6,8 +6,9 @@ against answers that do not come from the kernels: closed forms (quadratic roots
 chosen roots, the drop and apex times, arcs built backwards from a chosen contact, the grown-box
 windows of quadratic coordinates worked out by hand) and the float64 26-feature reference
 (:func:`arc_reference.arc_contact_by_features`) on random arcs and on grazing edge passes.
-The piece walk's root polish and dip search (``polish_root``, ``dip_below``) run through a
-second tiny kernel, on quartic gaps whose roots and minima come from NumPy's polynomial roots.
+The piece walk's root polish, dip search and quartic entry (``polish_root``, ``dip_below``,
+``quartic_entry``) run through a second tiny kernel, on quartic gaps whose roots and minima come
+from NumPy's polynomial roots.
 
 Units: positions and half extents [m], velocities [m/s], accelerations [m/s^2], times [s];
 every vector is in the box's local frame (core box ``[-h, h]``, Minkowski radius ``R``).
@@ -198,6 +199,21 @@ def named_arcs():
         # thrown onto the +x face plane x = 1.5 of a sharp box, no gravity along x
         "sharp box, +x face": ([3.5, 0.25, 0.0], [-4, 0.5, 0], [0, -2, 0], 1.0,
                                [1.5, 0.5, 0.25], 0.0, 1, 0.5, [1, 0, 0]),
+        # weak gravity (|g| < sqrt 2, where the vertex's s_v^2 g / 2 and s_v / (g / 2) differ
+        # in sign): y = -3/2 + 2^-9 + s - s^2 / 2, apex 2^-9 above the bottom plane y = -1 at
+        # s = 1, back below it at tau = 2; in at (1 - s)^2 = 2^-8
+        "weak gravity, apex dips into the bottom face": ([0.25, -1.5 + 2.0**-9, 0.0],
+                                                         [0.5, 1, 0], [0, -1, 0], 2.0, H, RB,
+                                                         1, 1.0 - 2.0**-4, [0, -1, 0]),
+        # moving straight in at 2^-24 m/s (in at any speed: v . n = -|v|), gravity away
+        "on the face creeping in, gravity away": ([0.25, TOP, 0.0], [0, -(2.0**-24), 0],
+                                                  [0, 8, 0], 1.0, H, RB, 1, 0.0, [0, 1, 0]),
+        # 2^-45 m inside the top face of a box 64 m long (the local scale 64.5 m): on the
+        # surface, within 16 ulps of the scale; leaving at 2 m/s under g = -8, back at
+        # y = 1: 4 s^2 - 2 s + 2^-45 = 0
+        "2^-45 inside a long box's face, leaving, comes back": (
+            [0.25, TOP - 2.0**-45, 0.0], [0.25, 2, 0], [0, -8, 0], 1.0, [64.0, 0.5, 0.25], RB,
+            1, (2.0 + np.sqrt(4.0 - 2.0**-41)) / 8.0, [0, 1, 0]),
     }
     s_star = 0.375
     for name, point, normal, u, g in FEATURE_CASES:
@@ -442,7 +458,8 @@ def inner_func(outer, name):
 
 @cache
 def search_kernel(name: str):
-    """Per row: ``dip_below`` and ``polish_root`` on the gap ``F(s) = |w(s)|^2 - R^2``."""
+    """Per row: ``dip_below``, ``polish_root`` and ``quartic_entry`` on the gap
+    ``F(s) = |w(s)|^2 - R^2`` over ``[lo, hi]``."""
     p = types_of(name)
     scalar, vec3 = p.scalar, p.vec3
     quartic_entry = inner_func(inner_func(arc_funcs(p).sweep_rounded_box_arc, "walk_pieces"),
@@ -454,18 +471,23 @@ def search_kernel(name: str):
     def run(c0: wp.array[vec3], c1: wp.array[vec3], c2: wp.array[vec3],
             radius: wp.array[scalar], lo: wp.array[scalar], hi: wp.array[scalar],
             tol: wp.array[scalar], found_out: wp.array[wp.int32], dip_out: wp.array[scalar],
-            root_out: wp.array[scalar]):
+            root_out: wp.array[scalar], entered_out: wp.array[wp.int32],
+            entry_out: wp.array[scalar]):
         i = wp.tid()
         found, s = dip_below(c0[i], c1[i], c2[i], radius[i], lo[i], hi[i], tol[i])
         found_out[i] = found
         dip_out[i] = s
         root_out[i] = polish_root(c0[i], c1[i], c2[i], radius[i], lo[i], hi[i], tol[i])
+        entered, s_entry = quartic_entry(c0[i], c1[i], c2[i], radius[i], lo[i], hi[i], tol[i])
+        entered_out[i] = entered
+        entry_out[i] = s_entry
 
     return run
 
 
 def run_searches(precision, rows):
-    """Launch :func:`search_kernel` over rows ``(c0, c1, c2, R, lo, hi, tol)``."""
+    """Launch :func:`search_kernel` over rows ``(c0, c1, c2, R, lo, hi, tol)``: the dip
+    search's ``found`` and time, the polished root, the quartic entry's ``found`` and time."""
     p = types_of(precision)
     cols = [np.array([np.asarray(r[k], np.float64) for r in rows]) for k in range(7)]
     inputs = [wp.array(c.astype(p.np_dtype), dtype=p.vec3) for c in cols[:3]]
@@ -473,6 +495,8 @@ def run_searches(precision, rows):
     n = len(rows)
     outs = [wp.array(np.full(n, -7, np.int32), dtype=wp.int32),
             wp.array(np.full(n, np.nan, p.np_dtype), dtype=p.scalar),
+            wp.array(np.full(n, np.nan, p.np_dtype), dtype=p.scalar),
+            wp.array(np.full(n, -7, np.int32), dtype=wp.int32),
             wp.array(np.full(n, np.nan, p.np_dtype), dtype=p.scalar)]
     wp.launch(search_kernel(precision), dim=n, inputs=inputs, outputs=outs, device="cpu")
     return [o.numpy() for o in outs]
@@ -518,6 +542,30 @@ DIPS = {
         [-1.080492991440681, 1.651237242261867, -1.257984452981859],
         [2.6770347484992096, -1.7006651730908706, -8.137292302310689],
         1.1029519914026764, 0.0, 0.7318419276335691, 7.318419276335691e-4),
+    # parts where Newton on F' (from F' and F'' at the iterate) must be right: a wrong step
+    # lands within tol of the iterate and stops the search at F > 0, or keeps landing near
+    # one end of the bracket, which then shrinks too slowly for the iterations
+    "an edge piece's part, a minimum of -0.044 R^2 at 2.10 s": (
+        [0.5065200160043164, 0.0, 2.674197713287978],
+        [-0.15536769049989885, 0.0, -1.1798828524606435],
+        [0.0060002527140121525, 0.0, -0.04850971523460604],
+        0.21217821016104596, 0.9471641579767756, 3.9535294386478013, ULPS * 3.9535294386478013),
+    "just after a concave part, a minimum of -1.7e-4 R^2 at 2.72 s": (
+        [-0.35045104032469937, 2.4254363868640287, -0.5906723242759668],
+        [0.9194378793619966, -3.6201369354566366, -2.6977321706046395],
+        [-0.24361793815757543, 0.988976388637287, 1.0830254529786274],
+        0.37271349501989837, 2.6521899524528645, 4.501562142568854, ULPS * 4.501562142568854),
+    "a part 0.08 s long, a minimum of -4.9e-6 R^2 at 0.070 s": (
+        [-0.06666041280375261, 0.03324192266491149, 0.07168785424706935],
+        [0.46083137842023003, 0.06758583236767537, 0.13328611819481406],
+        [1.9908256802551227, 0.16017301136303325, 0.34383114122860015],
+        0.0946007146262507, 0.03074304714314094, 0.10724170051300888,
+        ULPS * 0.10724170051300888),
+    "a corner 60 m away, a minimum of -4.3e-4 R^2 at 27.0 s": (
+        [38.00190117532917, 46.655979725667, 8.676909123794362],
+        [-2.809307603216552, -3.3287798651714375, -0.566525036209237],
+        [0.051991948273888526, 0.0593215377989621, 0.009014843366864311],
+        0.07491048925377704, 15.534507791055558, 33.01276529884191, ULPS * 33.01276529884191),
 }
 
 
@@ -526,9 +574,9 @@ def test_dip_search_on_shallow_convex_parts(precision):
     """``dip_below`` on convex parts whose dip (if any) is too shallow for the first guess:
     found exactly when F's float64 minimum on ``[lo, hi]`` (from the real roots of ``F'``) is
     below zero, and then at a time inside the part where F <= 0 (to rounding, 1e-12 R^2).
-    Float64 only: the dips are 1e-6 to 1e-8 of R^2 deep, below float32's resolution of F."""
+    Float64 only: most dips are 1e-6 to 1e-8 of R^2 deep, below float32's resolution of F."""
     rows = list(DIPS.values())
-    found, s, _ = run_searches(precision, rows)
+    found, s, *_ = run_searches(precision, rows)
     for k, (name, (c0, c1, c2, radius, lo, hi, _tol)) in enumerate(DIPS.items()):
         f = gap_polynomial(c0, c1, c2, radius)
         assert np.all(f.deriv(2)(np.linspace(lo, hi, 2001)) > 0.0), name  # convex part
@@ -564,13 +612,45 @@ def test_root_polish_stays_in_its_bracket(precision):
     the quartic, to 1e-12 of the bracket (the kernel stops at 4 ulps). Float64 only, as the
     dip search above (one kernel for both)."""
     rows = list(ROOTS.values())
-    _, _, root = run_searches(precision, rows)
+    _, _, root, *_ = run_searches(precision, rows)
     for k, (name, (c0, c1, c2, radius, lo, hi, _tol)) in enumerate(ROOTS.items()):
         f = gap_polynomial(c0, c1, c2, radius)
         assert f(lo) > 0.0 >= f(hi), name
         real = [r.real for r in f.roots() if abs(r.imag) < 1e-9 and lo <= r.real <= hi]
         assert len(real) == 1, name
         assert root[k] == pytest.approx(real[0], abs=1e-12 * (hi - lo)), name
+
+
+#: Corner pieces ``[lo, hi]`` (units as in :data:`DIPS`, the time origin at the piece's start)
+#: whose entering root lies in a dip just past the concave part of F: ``F'' < 0`` from 1.459
+#: to 2.153 s, and the convex part after it falls to -1.0e-4 R^2 at 2.422 s, below zero from
+#: 2.4146 to 2.4300 s. A split moved by a wrong ``F''`` leaves that dip in the part taken for
+#: concave, where no dip is searched (``F > 0`` at both its ends).
+PIECES = {
+    "a dip just past the concave part": (
+        [-1.7930190099816006, 0.8570593814879615, 0.22279608143175034],
+        [2.0857661155819724, -0.5857688308454208, -0.9108988148188545],
+        [-0.5810355638456228, 0.15062571235590275, 0.2507360492900225],
+        0.6235339536923699, 0.0, 2.6397706355848864, ULPS * 2.6397706355848864),
+}
+
+
+@pytest.mark.parametrize("precision", ["float64"])
+def test_quartic_entry_on_a_dip_beside_the_concave_part(precision):
+    """``quartic_entry``: the first entering root of F in ``[lo, hi]`` [s], against the float64
+    NumPy roots of the quartic, to 1e-12 of the piece; the construction checked first (the
+    root's dip lies in the convex part that starts where the concave part ends, the roots of
+    ``F''``). Float64 only, as the searches above (one kernel for all three)."""
+    rows = list(PIECES.values())
+    *_, entered, entry = run_searches(precision, rows)
+    for k, (name, (c0, c1, c2, radius, lo, hi, _tol)) in enumerate(PIECES.items()):
+        f = gap_polynomial(c0, c1, c2, radius)
+        split = sorted(r.real for r in f.deriv(2).roots() if abs(r.imag) < 1e-12)
+        real = sorted(r.real for r in f.roots() if abs(r.imag) < 1e-9 and lo <= r.real <= hi)
+        assert f(lo) > 0.0 and f(hi) > 0.0 and len(split) == 2 and len(real) == 2, name
+        assert split[1] < real[0] and f.deriv()(real[0]) < 0.0 < f.deriv()(real[1]), name
+        assert entered[k] == 1, name
+        assert entry[k] == pytest.approx(real[0], abs=1e-12 * (hi - lo)), name
 
 
 def axis_gravity_case(rng, kind):
@@ -654,3 +734,36 @@ def test_named_arcs_at_other_scales(precision, length, time):
                                        err_msg=name)
         else:
             assert out["s"][k] == span, name
+
+
+def test_sharpness_threshold_against_the_local_scale(precision):
+    """A box is sharp when ``R <= SHARP_REL * scale``, the scale being the largest of the
+    grown half extents and ``|a|``: its entry through an edge region is the grown-box entry,
+    with the normal of the face crossed last (a rounded one walks on to the edge's capsule, a
+    tilted normal). ``R = 64 eps``, boxes ``1/8`` m half wide, the
+    arcs entering beside an edge, 16 eps of time between the two faces' planes: sharp only
+    through one half extent 8 m long, or through a start 7.125 m out along one axis (that
+    axis's face crossed last, at 16 m/s); the scale without that component is about 1 m.
+    Gravity 1 m/s^2 along the axis that stays inside its slab. Positions [m], times [s]."""
+    eps = float(np.finfo(types_of(precision).np_dtype).eps)
+    rows = []  # (a, v, g, h, normal); every entry at s = 7/16 - 16 eps
+    for axis in range(3):
+        first, last = [k for k in range(3) if k != axis]
+        a, v, g, h = np.zeros(3), np.zeros(3), np.zeros(3), np.full(3, 0.125)
+        h[axis] = 8.0
+        a[[first, last]] = 1.0, 1.0 + 32 * eps
+        v[[first, last]] = -2.0
+        g[axis] = -1.0
+        rows.append((a, v, g, h, np.eye(3)[last]))
+        first, still = (axis + 1) % 3, (axis + 2) % 3
+        a, v, g, h = np.zeros(3), np.zeros(3), np.zeros(3), np.full(3, 0.125)
+        a[[axis, first]] = 7.125 - 192 * eps, 1.0
+        v[[axis, first]] = -16.0, -2.0
+        g[still] = -1.0
+        rows.append((a, v, g, h, np.eye(3)[axis]))
+    a, v, g, h, normals = (np.array([r[k] for r in rows]) for k in range(5))
+    out = run_arcs(precision, a, v, g, 1.0, h, 64 * eps)
+    for k, normal in enumerate(normals):
+        assert out["hit"][k] == 1, k
+        assert out["s"][k] == pytest.approx(0.4375 - 16 * eps, abs=4 * eps), k
+        np.testing.assert_array_equal(out["normal"][k], normal, err_msg=str(k))
