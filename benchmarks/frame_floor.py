@@ -13,9 +13,13 @@ part of the frame at a time, so the table attributes the cost:
 - ``+ candidate loop``: the bare step plus the broad phase's lookup of the frame's path over the
   boxes (``nearest.model_nearest_hit``; nothing is hit);
 - ``+ energy reset``: the bare step plus ``dynamics.energy_along_gravity`` every frame (the
-  linear model's default reset, which the frame kernel runs after every move);
+  linear model's default reset, which the frame kernel runs after every move with a box in
+  reach, and in a run of free frames once in ``FREE_RESET_EVERY`` frames);
 - ``warpsim``: ``Simulator.step(F)``, the frame kernel itself (the reset, the counters, the
   recording branches, the state written once);
+- ``warpsim, reset and test every frame``: the same with the kernel whose runs of free frames
+  reset the energy and test the bounds every frame (``Features.free_reset_every = 1``,
+  ``free_horizon = False``: the arithmetic of the second round, measured in the same run);
 - ``warpsim, standard room``: the same swarm among the standard room's 22 boxes, for scale.
 
 Both precisions and both motion models (the partial loops are the same for both; the
@@ -34,6 +38,7 @@ import warpsim as ws
 from warpsim.kernels import precision as fp
 from warpsim.kernels.data import model_structs
 from warpsim.kernels.dynamics import dynamics_funcs
+from warpsim.kernels.frame_kernel import frame_kernel
 from warpsim.kernels.nearest import model_nearest_hit
 from warpsim.kernels.variant import variant_kernel
 
@@ -110,6 +115,13 @@ def part_kernels(sim: ws.Simulator) -> dict:
             "+ energy reset": part("reset")}
 
 
+def with_features(sim: ws.Simulator, **changes) -> ws.Simulator:
+    """``sim`` running the frame kernel built with ``changes`` to its features."""
+    sim._features = sim._features.but(**changes)
+    sim._kernel = frame_kernel(sim._features)
+    return sim
+
+
 def part_call(sim: ws.Simulator, kernel, frames: int):
     """A call launching ``kernel`` over ``sim``'s swarm for ``frames`` frames."""
     out = sim.state_0.empty_like()
@@ -146,13 +158,17 @@ def case_rows(precision: str, motion: str, n: int, frames: int, repeats: int) ->
         warnings.simplefilter("ignore", ws.PrecisionWarning)
         sim = ws.Simulator(far, swarm, precision=precision, motion=motion, workers=1,
                            device="cpu")
+        every_frame = with_features(
+            ws.Simulator(far, swarm, precision=precision, motion=motion, workers=1,
+                         device="cpu"), free_reset_every=1, free_horizon=False)
     room_sim = ws.Simulator(room, swarm, precision=precision, motion=motion, workers=1,
                             device="cpu")
-    for s in (sim, room_sim):
+    for s in (sim, every_frame, room_sim):
         s.build()
     kernels = part_kernels(sim)
     calls = {name: part_call(sim, kernel, frames) for name, kernel in kernels.items()}
     calls["warpsim"] = lambda: sim.step(frames)
+    calls["warpsim, reset and test every frame"] = lambda: every_frame.step(frames)
     calls["warpsim, standard room"] = lambda: room_sim.step(frames)
     best = best_times(calls, repeats)
     ns = {name: t / (n * frames) * 1e9 for name, t in best.items()}

@@ -15,9 +15,32 @@ identity in free flight: every flight would be disturbed, every frame.
 Free flight (``Features.free_flight``): a frame whose path (the chord, or the arc's chord grown
 by its sagitta, grown by the sphere) lies beyond the box holding every box's reject bounds
 (``Boxes.lower`` / ``Boxes.upper``) cannot meet a box, so it takes the bounce loop's own
-no-contact step inline (the same arithmetic, the same bits) instead of calling the loop and its
+no-contact move inline (the same arithmetic, the same bits) instead of calling the loop and its
 broad phase. Built only for swarms that start beyond those bounds: in a closed room the test
-would only cost time (it measured 1.18x the float32 frame there).
+would only cost time (it measured 1.18x the float32 frame there). A run of free frames goes on
+in a loop of its own, and two things a frame with contacts does every frame are shared by the
+run:
+
+- the energy reset: the free move keeps the energy to rounding, so there the reset only removes
+  rounding drift; it is applied after the frames whose sphere age (frames since its birth, or
+  since the run's frame 0) is a multiple of ``Features.free_reset_every`` (32), and after the
+  last free frame before one that is not free. Both depend on the state and the absolute frame
+  only (the launch's last frame tests the next frame too), so the results do not depend on the
+  split into launches, the recording stride, the threads or the births. Without the
+  correction the reset only lowers the speed, so between resets the state may hold up to 32
+  frames' rounding above ``E`` (``tests/test_free_flight.py`` bounds it, with the parabola,
+  over 10 000 frames). A swarm made of a state starts a new run (age 0): it continues bit for
+  bit when that state's age is a multiple of 32.
+- the bounds test: the frames up to the next reset, record or the launch's end, and the frame
+  after them, are tested at once, against the range of the parabola over them on one axis
+  (``envelope_beyond_on``, with the rounding of the frames and of the test allowed for, erring
+  early); when it holds every frame's own test would pass, so they go untested, with the bits of
+  a test every frame (``Features.free_horizon`` False, checked by the tests). Otherwise the
+  frame is tested alone, as before.
+
+With ``free_reset_every = 1`` the kernel gives the bits of the kernel without the step. The
+orientation of a spinning sphere still turns every frame (its turn over a frame computed once a
+run: ``L`` does not change in free flight).
 
 Variants come from :func:`frame_kernel`, keyed by what the scene needs, so a
 scene without spin runs a kernel with no spin code in it.
@@ -36,6 +59,13 @@ from .dynamics import RESET_ULPS, dynamics_funcs
 from .precision import precision
 from .variant import variant_kernel
 
+#: Rounding allowance of a run's bounds test for many frames (:func:`frame_kernel`'s
+#: ``envelope_beyond_on``), in ulps per frame of the coordinate's scale: a frame's step rounds
+#: its coordinate and velocity at most twice each (half an ulp each) and the test about five
+#: times; 8 errs early by a factor of 2 or more, so the test never proves a frame clear that its
+#: own test would not pass.
+HORIZON_ULPS = 8.0
+
 
 @cache
 def frame_kernel(features: Features):
@@ -45,7 +75,8 @@ def frame_kernel(features: Features):
     writes the state once at the end, and (when ``record_every > 0``) writes every
     ``record_every``-th frame and the last one into the record arrays. The frames are the same
     arithmetic in the same order as one launch per frame, so the results are bit-identical
-    whatever the frames per launch.
+    whatever the frames per launch (a run of free frames included: its resets fall on frames of
+    the sphere's age).
 
     Args:
         features: what the kernel is built for (``data.Features``); every field is read:
@@ -61,7 +92,10 @@ def frame_kernel(features: Features):
             (``ballistic.ballistic_path``); the state's velocity is the true one at the frame's
             end for both. A linear kernel contains no ballistic code and vice versa.
             ``free_flight``: test each frame's path against the boxes' overall bounds first
-            and take the free step inline when it lies beyond them (module docstring).
+            and take the free step inline when it lies beyond them; runs of free frames reset
+            the energy once in ``free_reset_every`` frames of age and before a frame that is
+            not free, and test their bounds once for many frames (``free_horizon``; module
+            docstring).
             ``births``: sphere ``i`` takes the step into absolute frame ``k`` only when ``k >
             birth_frame[i]`` (its state is the one at its birth until then, and the frames it
             takes are the arithmetic of a run started at its birth); without it
@@ -107,6 +141,10 @@ def frame_kernel(features: Features):
     RESET_SLACK = scalar(RESET_ULPS * p.eps)
     SLACK = scalar(1.0 + REJECT_SLACK)
     PAD_REL = scalar(BOUNDS_PAD_REL)
+    HORIZON_SLACK = scalar(HORIZON_ULPS * p.eps)
+    RESET_EVERY = features.free_reset_every
+    horizon = features.free_horizon
+    RAISE = 1 if energy_correction else 0
 
     @wp.func(inline=True)
     def beyond_on(a: scalar, d: scalar, grow: scalar, lower: scalar, upper: scalar):
@@ -145,12 +183,76 @@ def frame_kernel(features: Features):
         return out
 
     @wp.func(inline=True)
+    def envelope_beyond_on(a: scalar, v: scalar, g: scalar, t: scalar, dt: scalar, frames: int,
+                           grow: scalar, lower: scalar, upper: scalar):
+        """1 when :func:`beyond_on` passes every one of ``frames`` free frames from the
+        coordinate ``a`` [m] with the velocity ``v`` [m/s] under gravity ``g`` [m/s^2] on one
+        axis, ``t = frames dt`` [s], each frame's path grown by ``grow`` [m].
+
+        The frames' chords lie on the parabola ``a + v s + g s^2 / 2``, ``s`` in ``[0, t]``,
+        so within ``[lo, hi]`` (each of ``v`` and ``g`` counted only on the side it moves
+        to), and each frame's reach is at most the one of a path from ``lo`` along ``hi -
+        lo``. The floats follow the parabola to ``drift``: the step's rounding of the
+        coordinate and of the velocity over ``frames`` frames and of this test
+        (``HORIZON_ULPS``), which errs early: 0 only means "test each frame"."""
+        half_tt = HALF * t * t
+        lo = a + wp.min(v, ZERO) * t + wp.min(g, ZERO) * half_tt
+        hi = a + wp.max(v, ZERO) * t + wp.max(g, ZERO) * half_tt
+        span = hi - lo
+        big = wp.max(wp.abs(lo), wp.abs(hi))
+        k = scalar(frames + 1)
+        drift = HORIZON_SLACK * k * (big + span + grow
+                                     + k * dt * (wp.abs(v) + wp.abs(g) * (t + dt)))
+        reach = grow * SLACK + PAD_REL * (big + span + grow) + drift
+        out = int(0)
+        if hi + reach < lower or lo - reach > upper:
+            out = 1
+        return out
+
+    @wp.func(inline=True)
+    def horizon_clear(x: vec3, v: vec3, grow: vec3, physics: Physics, boxes: Boxes, first: int,
+                      frames: int):
+        """The axis (-1: none; from ``first``, then the others) on which each of the next
+        ``frames`` free frames from ``x`` [m] with the velocity ``v`` [m/s], their paths grown
+        by ``grow`` [m] per axis (:func:`path_grow`), certainly passes the frame's own test
+        (:func:`clear_of_boxes`): then those frames are free without a test, the same answer
+        as testing each (:func:`envelope_beyond_on`)."""
+        g = physics.gravity
+        dt = physics.dt
+        t = scalar(frames) * dt
+        lower = boxes.lower
+        upper = boxes.upper
+        out = int(-1)
+        if envelope_beyond_on(x[first], v[first], g[first], t, dt, frames, grow[first],
+                              lower[first], upper[first]) == 1:
+            out = first
+        if out < 0:
+            for i in range(3):
+                if out < 0 and i != first:
+                    if envelope_beyond_on(x[i], v[i], g[i], t, dt, frames, grow[i], lower[i],
+                                          upper[i]) == 1:
+                        out = i
+        return out
+
+    @wp.func(inline=True)
+    def free_reset(x: vec3, v: vec3, energy: scalar, m: scalar, physics: Physics):
+        """The energy reset of a frame without supports (both motions' settling): ``v`` [m/s]
+        against the energy ``E`` [J] at ``x`` [m] through its part along gravity, raised back
+        only with the correction."""
+        return energy_along_gravity(v, energy, m, physics.gravity, x, physics.origin, RAISE)
+
+    @wp.func(inline=True)
+    def linear_grow(r: scalar, physics: Physics):
+        """How far [m] per axis the sphere reaches beyond the linear frame's chord: ``r``."""
+        return vec3(r, r, r)
+
+    @wp.func(inline=True)
     def linear_clear(x: vec3, v: vec3, r: scalar, physics: Physics, boxes: Boxes, first: int):
         """The axis (-1: none) on which the linear frame's chord from ``x`` [m] with the
         velocity ``v`` [m/s] at the frame's start lies beyond every box's bounds
         (:func:`clear_of_boxes`, from axis ``first``)."""
         d = (v + physics.gravity * (HALF * physics.dt)) * physics.dt
-        return clear_of_boxes(x, d, vec3(r, r, r), boxes.lower, boxes.upper, first)
+        return clear_of_boxes(x, d, linear_grow(r, physics), boxes.lower, boxes.upper, first)
 
     @wp.func(inline=True)
     def linear_free(x: vec3, v: vec3, physics: Physics):
@@ -193,19 +295,24 @@ def frame_kernel(features: Features):
         return v, o, energy
 
     @wp.func(inline=True)
+    def ballistic_grow(r: scalar, physics: Physics):
+        """How far [m] per axis the sphere reaches beyond the ballistic frame's chord: the
+        sagitta ``|g| dt^2 / 8`` and the radius (as ``nearest_arc.arc_path``)."""
+        gravity = physics.gravity
+        k = EIGHTH * physics.dt * physics.dt
+        return vec3(wp.abs(gravity[0]) * k + r, wp.abs(gravity[1]) * k + r,
+                    wp.abs(gravity[2]) * k + r)
+
+    @wp.func(inline=True)
     def ballistic_clear(x: vec3, v: vec3, r: scalar, physics: Physics, boxes: Boxes,
                         first: int):
         """The axis (-1: none) on which the ballistic frame's arc from ``x`` [m] with the
-        velocity ``v`` [m/s] lies beyond every box's bounds: its chord's bounds grown by the
-        sagitta ``|g| dt^2 / 8`` and the radius (as ``nearest_arc.arc_path``;
-        :func:`clear_of_boxes`, from axis ``first``)."""
+        velocity ``v`` [m/s] lies beyond every box's bounds: its chord's bounds grown by
+        :func:`ballistic_grow` (:func:`clear_of_boxes`, from axis ``first``)."""
         gravity = physics.gravity
         dt = physics.dt
-        k = EIGHTH * dt * dt
-        sag = vec3(wp.abs(gravity[0]) * k + r, wp.abs(gravity[1]) * k + r,
-                   wp.abs(gravity[2]) * k + r)
-        return clear_of_boxes(x, dt * (v + (HALF * dt) * gravity), sag, boxes.lower,
-                              boxes.upper, first)
+        return clear_of_boxes(x, dt * (v + (HALF * dt) * gravity), ballistic_grow(r, physics),
+                              boxes.lower, boxes.upper, first)
 
     @wp.func(inline=True)
     def ballistic_free(x: vec3, v: vec3, physics: Physics):
@@ -236,8 +343,32 @@ def frame_kernel(features: Features):
 
     if motion == "ballistic":
         frame_clear, free_move, settle = ballistic_clear, ballistic_free, ballistic_settle
+        path_grow = ballistic_grow
     else:
         frame_clear, free_move, settle = linear_clear, linear_free, linear_settle
+        path_grow = linear_grow
+
+    @wp.func(inline=True)
+    def spin_turn(L: vec3, o: quat, r: scalar, m: scalar, physics: Physics):
+        """The orientation's turn over one frame of a free run (``L`` [kg m^2/s] never changes
+        there): ``(q, 1)`` with ``q = exp(1/2 Rot dt)``, or ``(o, 0)`` when the sphere does not
+        turn; :func:`turn` applies it, the arithmetic of ``integrate_orientation``."""
+        rot = rotation_vector(L, inertia(m, r), physics.max_rot)
+        angle = wp.length(rot) * physics.dt
+        q = o
+        turning = int(0)
+        if angle > ZERO:
+            q = wp.quat_from_axis_angle(wp.normalize(rot), angle)
+            turning = 1
+        return q, turning
+
+    @wp.func(inline=True)
+    def turn(o: quat, q: quat, turning: int):
+        """``o`` turned by :func:`spin_turn`'s ``q`` (when ``turning``), renormalised."""
+        out = o
+        if turning == 1:
+            out = q * o
+        return wp.normalize(out)
 
     @wp.func(inline=True)
     def one_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
@@ -366,29 +497,71 @@ def frame_kernel(features: Features):
             born = birth_frame[i] - first_frame  # frames of this launch before its birth
         if wp.static(free_flight):
             # a frame beyond every box's bounds takes the free step; a run of them goes on in
-            # a loop of its own, with no call of the bounce loop in it (the same steps, bits)
+            # a loop of its own, with no call of the bounce loop in it (the same moves, bits)
+            grow = path_grow(r, physics)
+            age = first_frame  # the sphere's age after the launch's frame f is age + f + 1
+            if wp.static(births):
+                age = first_frame - birth_frame[i]
             f = int(0)
+            free = int(-2)  # the test of frame f: an axis, -1 (not free), -2 (not made yet)
             while f < frame_count:
                 live = int(1)
                 if wp.static(births):
                     if f < born:
                         live = 0
-                free = int(-1)
-                if live == 1:
+                if live == 1 and free == -2:
                     free = frame_clear(x, v, r, physics, boxes, -1)
-                if free >= 0:
-                    while free >= 0:
-                        x, v = free_move(x, v, physics)
-                        v, o, energy = settle(x, v, L, o, energy, r, m, physics, 0)
-                        row = record_frame(f, frame_count, record_every, row, i, with_motion,
-                                           x, v, L, o, r, m, physics, orientation_in,
-                                           record_position_out, record_orientation_out,
-                                           record_velocity_out, record_angular_velocity_out)
-                        f += 1
-                        if f < frame_count:
-                            free = frame_clear(x, v, r, physics, boxes, free)
+                if live == 1 and free >= 0:
+                    turn_by = o
+                    turning = int(0)
+                    if wp.static(spin):
+                        turn_by, turning = spin_turn(L, o, r, m, physics)
+                    # frames to the next energy reset: an age multiple of RESET_EVERY
+                    to_reset = RESET_EVERY - (age + f) % RESET_EVERY
+                    while free >= 0 and f < frame_count:
+                        # frames to take untested: up to the next reset, record and the
+                        # launch's end, when they and the frame after them are proven clear
+                        n = wp.min(to_reset, frame_count - f)
+                        if record_every > 0:
+                            n = wp.min(n, record_every - f % record_every)
+                        after = int(-2)  # the test of the frame after them
+                        if wp.static(horizon):
+                            sure = horizon_clear(x, v, grow, physics, boxes, free, n + 1)
+                            if sure >= 0:
+                                free = sure
+                                after = sure
+                            else:
+                                n = 1
                         else:
-                            free = -1
+                            n = 1
+                        for _k in range(n):
+                            x, v = free_move(x, v, physics)
+                            if wp.static(spin):
+                                o = turn(o, turn_by, turning)
+                        f += n
+                        to_reset -= n
+                        # the last frame's energy reset: at an age multiple of RESET_EVERY, and
+                        # before a frame that is not free (tested at the launch's end too, so
+                        # that the state is that of any other split into launches)
+                        reset = int(0)
+                        if to_reset == 0:
+                            reset = 1
+                            to_reset = RESET_EVERY
+                        elif after == -2:
+                            after = frame_clear(x, v, r, physics, boxes, free)
+                            if after < 0:
+                                reset = 1
+                        if reset == 1:
+                            v = free_reset(x, v, energy, m, physics)
+                            after = -2
+                            if f < frame_count:
+                                after = frame_clear(x, v, r, physics, boxes, free)
+                        row = record_frame(f - 1, frame_count, record_every, row, i,
+                                           with_motion, x, v, L, o, r, m, physics,
+                                           orientation_in, record_position_out,
+                                           record_orientation_out, record_velocity_out,
+                                           record_angular_velocity_out)
+                        free = after
                 else:
                     x, v, L, o, energy, bounces, supports, capped = counted_frame(
                         live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1, sphere,
@@ -398,6 +571,7 @@ def frame_kernel(features: Features):
                                        record_orientation_out, record_velocity_out,
                                        record_angular_velocity_out)
                     f += 1
+                    free = -2
         else:
             for f in range(frame_count):
                 live = int(1)

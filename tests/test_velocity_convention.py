@@ -111,14 +111,18 @@ def test_restart_from_a_state_continues_bit_for_bit(device, precision, motion):
 
 def test_swarm_from_a_state_continues_free_flight_bit_for_bit(precision):
     """Without contacts a swarm made of a state's position and velocity is the same motion,
-    bit for bit: the velocity is the velocity, no half kick to add or remove."""
+    bit for bit: the velocity is the velocity, no half kick to add or remove. (The swarm starts
+    a new run, its spheres' age 0: made of a state whose age is a multiple of
+    ``FREE_RESET_EVERY``, its free flight resets the energy on the same frames.)"""
+    from warpsim.kernels.data import FREE_RESET_EVERY
+
     rng = np.random.default_rng(3)
     p0, v0 = rng.uniform(-5, 5, (8, 3)), rng.uniform(-5, 5, (8, 3))
     scene = ws.Scene(ws.RoundedBoxes(center=[[0.0, -1e4, 0.0]], half_extents=[[1, 1, 1]]))
     straight = ws.Simulator(scene, ws.Swarm(p0, v0), precision=precision)
-    straight.step(40)
+    straight.step(FREE_RESET_EVERY + 25)
     first = ws.Simulator(scene, ws.Swarm(p0, v0), precision=precision)
-    first.step(15)
+    first.step(FREE_RESET_EVERY)
     s = first.state()
     again = ws.Simulator(scene, ws.Swarm(s.position, s.velocity), precision=precision)
     again.step(25)

@@ -602,8 +602,12 @@ def _energy_origin(scene: Scene, swarm: Swarm) -> np.ndarray:
 def _starts_in_free_flight(boxes, swarm: Swarm) -> bool:
     """Whether some sphere starts beyond the box holding every obstacle's reject bounds (the
     device model's ``Boxes.lower`` / ``upper``): then the kernel is built with the free-flight
-    step (the same bits either way). Spheres that start inside it, as in a closed room, stay
-    near the boxes, and the step's test would only cost them time."""
+    step (the same moves; its runs of free frames reset the energy once in
+    ``FREE_RESET_EVERY`` frames instead of every frame, which changes their bits by rounding).
+    Spheres that start inside it, as in a closed room, stay near the boxes, and the step's test
+    would only cost them time. The choice depends on the swarm: a shard of a swarm whose
+    spheres all start inside those bounds runs without the step, and its spheres that later
+    fly beyond them are then reset every frame."""
     if len(boxes) == 0 or len(swarm) == 0:
         return False
     lower, upper = bvh_bounds(boxes.center, boxes.world_extent())
