@@ -238,6 +238,44 @@ def assert_births_as_reference(path, nozzle_reference):
             assert sorted(hidden.tolist()) == ids[swarm.birth_frame[ids] > frame].tolist()
 
 
+def open_room():
+    """The room without its ceiling, its emitter reaching 0.2 m above the walls' bounds and
+    throwing upwards: a few spheres start beyond every box's bounds, in some shards only, and
+    the others fly out over the walls later (free frames in every shard)."""
+    import dataclasses
+
+    room = ws.Scene.load(SCENE)
+    keep = np.arange(len(room.boxes)) != int(np.argmax(room.boxes.center[:, 1]))
+    boxes = ws.RoundedBoxes(center=room.boxes.center[keep],
+                            half_extents=room.boxes.half_extents[keep],
+                            rotation=room.boxes.rotation[keep], radius=room.boxes.radius[keep])
+    emitter = dataclasses.replace(room.emitter, center=(0.0, 4.65, 0.0),
+                                  half_extents=(4.9, 1.65, 4.9), velocity=(0.0, 8.0, 0.0))
+    return ws.Scene(boxes, gravity=room.gravity, emitter=emitter, name="open-room")
+
+
+@pytest.mark.slow
+def test_open_scene_shards_equal_one_process(tmp_path):
+    """Shards choose the free-flight kernel for the whole run (``draw.may_start_free``), not
+    from their own spheres, whose choices differ here: 3 shards, the plain run of the same
+    command and the command line's run, bit for bit (the free frames' energy reset runs once
+    in 32 frames, so the two kernels differ by rounding)."""
+    from warpsim.distributed.draw import may_start_free
+    from warpsim.simulator import _starts_in_free_flight
+
+    scene = open_room()
+    own = [_starts_in_free_flight(scene.boxes, wd.shard_swarm(scene, N, SEED, a, b, BLOCK))
+           for a, b in wd.plan_shards(N, 3, BLOCK)]
+    assert may_start_free(scene) and len(set(own)) == 2  # the shards alone would differ
+    frames = 400  # long enough for the two kernels to differ (a sphere at 100 frames, 4 at 400)
+    swarm = wd.sharded_spawn(scene, N, SEED, BLOCK)
+    whole = ws.Simulator(scene, swarm, free_flight=True).run(frames, every=EVERY,
+                                                                velocities=True)
+    out = tmp_path / "open.usda"
+    run(scene, out, shards=3, frames=frames, velocities=True)
+    assert_same_as_reference(wd.read(out), (swarm, whole), velocities=True)
+
+
 @pytest.mark.slow
 def test_births_in_process_shards_equal_one_simulator(nozzle_reference, tmp_path):
     scene = nozzle_reference[0]

@@ -147,6 +147,11 @@ class Simulator:
         energy_correction: reset each sphere's speed from its energy after each frame; None
             takes the scene's setting for the motion (``scene.energy_correction_for``: on for
             the linear model, off for the ballistic one, unless the scene says).
+        free_flight: build the kernel with the free-flight step (frames beyond every box's
+            bounds skip the broad phase; their energy reset runs once in
+            ``FREE_RESET_EVERY`` frames, which changes their bits by rounding); None chooses
+            it from the swarm (some sphere starts beyond those bounds). Give it for every part
+            of a run simulated in parts, so that all parts run the same kernel.
 
     Attributes:
         broad_phase: the broad phase compiled into the kernel: ``"brute"``, ``"bvh"``,
@@ -160,7 +165,8 @@ class Simulator:
     def __init__(self, scene: Scene, swarm: Swarm, dt: float | None = None,
                  max_bounces: int | None = None, device=None, precision: str = "float32",
                  broad_phase: str = "auto", workers: int | None = None,
-                 motion: str | None = None, energy_correction: bool | None = None):
+                 motion: str | None = None, energy_correction: bool | None = None,
+                 free_flight: bool | None = None):
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be a warpsim.Scene, got {type(scene).__name__}")
         if not isinstance(swarm, Swarm):
@@ -205,7 +211,9 @@ class Simulator:
                                   lossy=scene.energy_retention < 1.0,
                                   energy_correction=self.energy_correction,
                                   births=swarm.has_births,
-                                  free_flight=_starts_in_free_flight(scene.boxes, swarm))
+                                  free_flight=(_starts_in_free_flight(scene.boxes, swarm)
+                                               if free_flight is None
+                                               else check.flag("free_flight", free_flight)))
         self._kernel = frame_kernel(self._features)
         self._upload(swarm)
         self._shards = _shards(self._n, self.workers)
@@ -605,9 +613,10 @@ def _starts_in_free_flight(boxes, swarm: Swarm) -> bool:
     step (the same moves; its runs of free frames reset the energy once in
     ``FREE_RESET_EVERY`` frames instead of every frame, which changes their bits by rounding).
     Spheres that start inside it, as in a closed room, stay near the boxes, and the step's test
-    would only cost them time. The choice depends on the swarm: a shard of a swarm whose
-    spheres all start inside those bounds runs without the step, and its spheres that later
-    fly beyond them are then reset every frame."""
+    would only cost them time. The choice depends on the swarm, so two parts of one swarm
+    simulated apart could choose differently and differ by rounding: a run split into parts
+    passes ``Simulator(free_flight=...)`` chosen for the whole run (the sharded runs and the
+    command line take ``distributed.draw.may_start_free`` of the scene's emitter)."""
     if len(boxes) == 0 or len(swarm) == 0:
         return False
     lower, upper = bvh_bounds(boxes.center, boxes.world_extent())

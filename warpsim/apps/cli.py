@@ -396,14 +396,15 @@ def _cmd_run(args) -> int:
     check_device(args.device, args.debug_mode)
     # the block draw of a sharded run, so that the same command with --shards or --dask
     # simulates the same spheres, bit for bit
-    from ..distributed.draw import DEFAULT_BLOCK, sharded_spawn
+    from ..distributed.draw import DEFAULT_BLOCK, may_start_free, sharded_spawn
 
     swarm = sharded_spawn(scene, n, args.seed, DEFAULT_BLOCK if args.block is None
                           else check.positive_int("block", args.block), dt=args.dt)
     extra = _simulator_options(args)
     sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
                        device=args.device, precision=args.precision,
-                       broad_phase=args.broad_phase, **extra)
+                       broad_phase=args.broad_phase, free_flight=may_start_free(scene),
+                       **extra)
     if subset is not None:
         options["spheres"] = subset
     print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "

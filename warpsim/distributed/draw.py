@@ -163,6 +163,25 @@ def sharded_spawn(scene: Scene, n: int | None = None, seed: int | None = None,
     return shard_swarm(scene, n, seed, 0, n, block, dt)
 
 
+def may_start_free(scene: Scene) -> bool:
+    """Whether a sphere of ``scene``'s emitter can start beyond the box holding every
+    obstacle's reject bounds (the emission region grown by the smallest radius reaching past
+    it on some axis): the free-flight step of the frame kernel for every part of a sharded run
+    and for the one-process run of the same command alike (``Simulator(free_flight=...)``), so
+    that they run the same kernel and agree bit for bit whatever spheres each part holds."""
+    from ..device import bvh_bounds
+
+    boxes, emitter = scene.boxes, scene.emitter
+    if len(boxes) == 0:
+        return False
+    lower, upper = bvh_bounds(boxes.center, boxes.world_extent())
+    center = np.asarray(emitter.center, float)
+    half = np.asarray(emitter.half_extents, float)
+    r_min = float(np.min(emitter.radius))
+    return bool(np.any(center + half - r_min > upper.max(axis=0))
+                or np.any(center - half + r_min < lower.min(axis=0)))
+
+
 SWARM_FIELDS = ("position", "velocity", "radius", "mass", "angular_momentum", "orientation",
                 "birth_frame")
 

@@ -149,9 +149,12 @@ def scene_key(scene: Scene) -> str:
 def _simulator(scene: Scene, swarm: Swarm, spec: RunSpec):
     from ..simulator import Simulator
 
+    from .draw import may_start_free
+
     return Simulator(scene, swarm, dt=spec.dt, max_bounces=spec.max_bounces, device=spec.device,
                      precision=spec.precision, broad_phase=spec.broad_phase,
-                     workers=spec.threads, **dict(spec.options))
+                     workers=spec.threads, free_flight=may_start_free(scene),
+                     **dict(spec.options))
 
 
 def _worker_name() -> str:
