@@ -214,6 +214,33 @@ def named_arcs():
         "2^-45 inside a long box's face, leaving, comes back": (
             [0.25, TOP - 2.0**-45, 0.0], [0.25, 2, 0], [0, -8, 0], 1.0, [64.0, 0.5, 0.25], RB,
             1, (2.0 + np.sqrt(4.0 - 2.0**-41)) / 8.0, [0, 1, 0]),
+        # 1 ulp inside the top face, "leaving" at 2^-40 m/s (more than the tangent margin),
+        # gravity in: it can never rise out of the touch band (vn^2 / 2|g| = 2^-84 m) and has
+        # no crossing to come back through: in at once (it fell through a nearly level face)
+        "1 ulp inside the face, leaving by rounding": ([0.25, TOP - 2.0**-52, 0.0],
+                                                       [1, 2.0**-40, 0], [0, -8, 0], 1.0,
+                                                       H, RB, 1, 0.0, [0, 1, 0]),
+        # leaving at 2^-20 m/s rises 2^-44 m, out of the band (16 ulps of 1.5 m): back on the
+        # plane at 2 vn / 8 = 2^-22
+        "on the face, a hop out of the band": ([0.25, TOP, 0.0], [1, 2.0**-20, 0], [0, -8, 0],
+                                               1.0, H, RB, 1, 2.0**-22, [0, 1, 0]),
+        # on the +x top edge at 45 degrees, sliding round it (0.25 m/s across its axis, 3 along
+        # it) with 2^-44 m/s outwards: the curve holds it (k = -8 sqrt(1/2) + 0.125 / R < 0),
+        # so in at once (far from the origin such a start fell through the curve)
+        "on an edge leaving by rounding, held": ([1.0 + RB * SQ2, 0.5 + RB * SQ2, 0.0],
+                                                 [-0.25 + 2.0**-44, 0.25 + 2.0**-44, 3.0],
+                                                 [0, -8, 0], 1.0, H, RB, 1, 0.0,
+                                                 [SQ2, SQ2, 0]),
+        # the same edge at 2 m/s across its axis, 2^-12 m/s outwards (beyond the tangent
+        # margin in both precisions): too fast to hold (8 / R > 8 sqrt(1/2)), it leaves the
+        # curve and lands on the top face y = 1 at 4 s^2 - (2 + 2^-12) s + 1/2 - R SQ2 = 0
+        "on an edge leaving, too fast to hold": ([1.0 + RB * SQ2, 0.5 + RB * SQ2, 0.0],
+                                                 [-2.0 + 2.0**-12, 2.0 + 2.0**-12, 0.0],
+                                                 [0, -8, 0], 1.0, H, RB, 1,
+                                                 (2.0 + 2.0**-12 + np.sqrt(
+                                                     (2.0 + 2.0**-12)**2
+                                                     - 16.0 * (0.5 - RB * SQ2))) / 8.0,
+                                                 [0, 1, 0]),
     }
     s_star = 0.375
     for name, point, normal, u, g in FEATURE_CASES:
