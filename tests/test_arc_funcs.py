@@ -220,6 +220,12 @@ def named_arcs():
         "1 ulp inside the face, leaving by rounding": ([0.25, TOP - 2.0**-52, 0.0],
                                                        [1, 2.0**-40, 0], [0, -8, 0], 1.0,
                                                        H, RB, 1, 0.0, [0, 1, 0]),
+        # the same on the face's +x border line (x = h exactly: the face, not the edge),
+        # sliding onto the face at 3 m/s: held by the face alone (on the edge, 9 / R > 8
+        # would let it go)
+        "1 ulp inside the face's border, onto it, leaving by rounding": (
+            [1.0, TOP - 2.0**-52, 0.0], [-3, 2.0**-40, 0], [0, -8, 0], 1.0, H, RB, 1, 0.0,
+            [0, 1, 0]),
         # leaving at 2^-20 m/s rises 2^-44 m, out of the band (16 ulps of 1.5 m): back on the
         # plane at 2 vn / 8 = 2^-22
         "on the face, a hop out of the band": ([0.25, TOP, 0.0], [1, 2.0**-20, 0], [0, -8, 0],
@@ -631,6 +637,32 @@ ROOTS = {
         [-9.648123046245633, -9.690477407424607, 9.96247041605571],
         1.9354830445337592, 0.0, 0.307068407148792, ULPS * 0.31),
 }
+
+
+def test_edge_starts_leaving_by_rounding_held_or_not():
+    """float64: on the +x top edge at 45 degrees (``R = 1/2``, ``g . n = -8 sqrt(1/2)``), a
+    start moving round the edge at ``u`` across its axis and outwards at ``2^-40`` m/s (beyond
+    the tangent margin, far inside the touch band's rise): the curve holds it when ``u^2 / R <
+    -g . n`` (in at once, ``s = 0``); faster it leaves the curve, and the next contact is a
+    return to the edge or the landing on the top face (``4 s^2 - u sqrt(1/2) s + 1/2 - R
+    sqrt(1/2) = 0``), never ``s = 0``. (``arc.held_within_rounding``: the curvature term, its sign and the
+    edge/face count; float32 cannot hold the 2^-40.)"""
+    point = np.array([1.0 + RB * SQ2, 0.5 + RB * SQ2, 0.0])
+    out_v = 2.0**-40 * np.array([1.0, 1.0, 0.0])
+    rows = [(0.5, 0.0), (np.sqrt(3.2), None), (np.sqrt(8.0), "top")]  # u^2 = 1/4, 3.2, 8
+    a = np.array([point] * len(rows))
+    v = np.array([u * SQ2 * np.array([-1.0, 1.0, 0.0]) + out_v for u, _ in rows])
+    out = run_arcs("float64", a, v, [0.0, -8.0, 0.0], 1.0, H, RB)
+    assert np.all(out["hit"] == 1)
+    for k, (u, want) in enumerate(rows):
+        if want == 0.0:
+            assert out["s"][k] == 0.0
+        elif want == "top":
+            up = u * SQ2  # the vertical part of the speed round the edge
+            s_top = (up + np.sqrt(up * up - 16.0 * (0.5 - RB * SQ2))) / 8.0
+            assert out["s"][k] == pytest.approx(s_top, abs=1e-11)
+        else:
+            assert out["s"][k] > 0.01
 
 
 @pytest.mark.parametrize("precision", ["float64"])
