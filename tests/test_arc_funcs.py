@@ -639,7 +639,7 @@ ROOTS = {
 }
 
 
-def test_edge_starts_leaving_by_rounding_held_or_not():
+def test_edge_starts_leaving_by_rounding_held_or_not_float64():
     """float64: on the +x top edge at 45 degrees (``R = 1/2``, ``g . n = -8 sqrt(1/2)``), a
     start moving round the edge at ``u`` across its axis and outwards at ``2^-40`` m/s (beyond
     the tangent margin, far inside the touch band's rise): the curve holds it when ``u^2 / R <
