@@ -491,6 +491,14 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
         return hit, s_hit, normal
 
     @wp.func
+    def local_scale(a: vec3, bound: vec3):
+        """The scale [m] of a sweep's local computation: the largest of the grown box's half
+        extents ``bound`` and of the start's coordinates ``a`` (its touch band is ``TOUCH_ULPS``
+        of it)."""
+        return wp.max(wp.max(wp.max(bound[0], bound[1]), bound[2]),
+                      wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2])))
+
+    @wp.func
     def held_within_rounding(a: vec3, v: vec3, h: vec3, radius: scalar, dist0: scalar,
                              vn: scalar, gn: scalar, slack: scalar):
         """1 when a start within the touch band of the surface (signed distance ``dist0`` [m],
@@ -565,8 +573,7 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
                 normal = n_l
         elif tau > ZERO:
             bound = h + vec3(radius, radius, radius)
-            scale = wp.max(wp.max(wp.max(bound[0], bound[1]), bound[2]),
-                           wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2])))
+            scale = local_scale(a, bound)
             slack = TOUCH_REL * scale
             tol = ROOT_TOL * tau
             # cheap exact reject: the arc's range along each local axis against the grown box
@@ -675,4 +682,5 @@ def arc_funcs(p: Precision) -> SimpleNamespace:
         return hit, s_hit, normal
 
     return SimpleNamespace(arc_point=arc_point, quadratic_roots=quadratic_roots,
+                           local_scale=local_scale,
                            box_entry=box_entry, sweep_rounded_box_arc=sweep_rounded_box_arc)

@@ -29,7 +29,7 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
     Returns:
         Namespace with ``inertia``, ``clamp_momentum``, ``rotation_vector``, ``friction_spin``,
         ``potential``, ``energy_along_gravity``, ``kinetic_energy`` and
-        ``integrate_orientation``.
+        ``integrate_orientation`` (and its parts ``orientation_step``, ``turned``).
     """
     scalar, vec3, quat = p.scalar, p.vec3, p.quat
     ZERO = scalar(0.0)
@@ -176,17 +176,36 @@ def dynamics_funcs(p: Precision) -> SimpleNamespace:
         return HALF * m * wp.dot(v, v)
 
     @wp.func
+    def orientation_step(o: quat, rot: vec3, dt: scalar):
+        """The turn of one frame under a constant world-frame ``Rot`` [rad/s]: ``(q, 1)`` with
+        ``q = exp(1/2 Rot dt)``, or ``(o, 0)`` when it does not turn (``|Rot| dt = 0``); for a
+        run of frames with the same ``Rot``, computed once (:func:`turned`)."""
+        angle = wp.length(rot) * dt
+        q = o
+        turning = int(0)
+        if angle > ZERO:
+            q = wp.quat_from_axis_angle(wp.normalize(rot), angle)
+            turning = 1
+        return q, turning
+
+    @wp.func
+    def turned(o: quat, q: quat, turning: int):
+        """``o`` turned by :func:`orientation_step`'s ``q`` (when ``turning``), renormalised."""
+        out = o
+        if turning == 1:
+            out = q * o
+        return wp.normalize(out)
+
+    @wp.func
     def integrate_orientation(o: quat, rot: vec3, dt: scalar):
         """``o <- exp(1/2 Rot dt) (x) o``, renormalised (world-frame ``Rot``, constant over dt)."""
-        angle = wp.length(rot) * dt
-        out = o
-        if angle > ZERO:
-            out = wp.quat_from_axis_angle(wp.normalize(rot), angle) * o
-        return wp.normalize(out)
+        q, turning = orientation_step(o, rot, dt)
+        return turned(o, q, turning)
 
     return SimpleNamespace(inertia=inertia, clamp_momentum=clamp_momentum,
                            rotation_vector=rotation_vector, friction_spin=friction_spin,
                            potential=potential, energy_along_gravity=energy_along_gravity,
                            energy_along_velocity=energy_along_velocity,
                            kinetic_energy=kinetic_energy,
-                           integrate_orientation=integrate_orientation)
+                           integrate_orientation=integrate_orientation,
+                           orientation_step=orientation_step, turned=turned)

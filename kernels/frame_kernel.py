@@ -134,6 +134,8 @@ def frame_kernel(features: Features):
     rotation_vector = dyn.rotation_vector
     inertia = dyn.inertia
     integrate_orientation = dyn.integrate_orientation
+    orientation_step = dyn.orientation_step
+    turned = dyn.turned
     arc_point = arc_funcs(p).arc_point
     ZERO = scalar(0.0)
     HALF = scalar(0.5)
@@ -236,9 +238,9 @@ def frame_kernel(features: Features):
 
     @wp.func(inline=True)
     def free_reset(x: vec3, v: vec3, energy: scalar, m: scalar, physics: Physics):
-        """The energy reset of a frame without supports (both motions' settling): ``v`` [m/s]
-        against the energy ``E`` [J] at ``x`` [m] through its part along gravity, raised back
-        only with the correction."""
+        """The energy reset of a frame without supports (both motions' settling, and a run of
+        free frames): ``v`` [m/s] against the energy ``E`` [J] at ``x`` [m] through its part
+        along gravity, raised back only with the correction."""
         return energy_along_gravity(v, energy, m, physics.gravity, x, physics.origin, RAISE)
 
     @wp.func(inline=True)
@@ -285,10 +287,8 @@ def frame_kernel(features: Features):
                     v = vec3(ZERO, ZERO, ZERO)
                 else:
                     v = v * wp.sqrt(kinetic / have)
-        elif wp.static(energy_correction):
-            v = energy_along_gravity(v, energy, m, gravity, x, origin, 1)
         else:
-            v = energy_along_gravity(v, energy, m, gravity, x, origin, 0)
+            v = free_reset(x, v, energy, m, physics)
         if wp.static(spin):
             rot = rotation_vector(L, inertia(m, r), physics.max_rot)
             o = integrate_orientation(o, rot, physics.dt)
@@ -327,15 +327,10 @@ def frame_kernel(features: Features):
         back only with the correction) and the orientation. After a frame with supports
         (the sphere may be sliding) the speed is scaled, its direction kept along the
         surface; otherwise only the part along gravity changes (the sideways speed kept)."""
-        raise_ok = int(0)
-        if wp.static(energy_correction):
-            raise_ok = 1
         if supports > 0:
-            v = energy_along_velocity(v, energy, m, physics.gravity, x, physics.origin,
-                                      raise_ok)
+            v = energy_along_velocity(v, energy, m, physics.gravity, x, physics.origin, RAISE)
         else:
-            v = energy_along_gravity(v, energy, m, physics.gravity, x, physics.origin,
-                                     raise_ok)
+            v = free_reset(x, v, energy, m, physics)
         if wp.static(spin):
             rot = rotation_vector(L, inertia(m, r), physics.max_rot)
             o = integrate_orientation(o, rot, physics.dt)
@@ -351,24 +346,10 @@ def frame_kernel(features: Features):
     @wp.func(inline=True)
     def spin_turn(L: vec3, o: quat, r: scalar, m: scalar, physics: Physics):
         """The orientation's turn over one frame of a free run (``L`` [kg m^2/s] never changes
-        there): ``(q, 1)`` with ``q = exp(1/2 Rot dt)``, or ``(o, 0)`` when the sphere does not
-        turn; :func:`turn` applies it, the arithmetic of ``integrate_orientation``."""
-        rot = rotation_vector(L, inertia(m, r), physics.max_rot)
-        angle = wp.length(rot) * physics.dt
-        q = o
-        turning = int(0)
-        if angle > ZERO:
-            q = wp.quat_from_axis_angle(wp.normalize(rot), angle)
-            turning = 1
-        return q, turning
-
-    @wp.func(inline=True)
-    def turn(o: quat, q: quat, turning: int):
-        """``o`` turned by :func:`spin_turn`'s ``q`` (when ``turning``), renormalised."""
-        out = o
-        if turning == 1:
-            out = q * o
-        return wp.normalize(out)
+        there), computed once a run: ``dynamics.orientation_step`` of the rotation vector;
+        ``turned`` applies it, the arithmetic of ``integrate_orientation``."""
+        return orientation_step(o, rotation_vector(L, inertia(m, r), physics.max_rot),
+                                physics.dt)
 
     @wp.func(inline=True)
     def one_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
@@ -537,7 +518,7 @@ def frame_kernel(features: Features):
                         for _k in range(n):
                             x, v = free_move(x, v, physics)
                             if wp.static(spin):
-                                o = turn(o, turn_by, turning)
+                                o = turned(o, turn_by, turning)
                         f += n
                         to_reset -= n
                         # the last frame's energy reset: at an age multiple of RESET_EVERY, and

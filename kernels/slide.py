@@ -95,6 +95,7 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
     Boxes, BroadPhase, _, _ = model_structs(p)
     arc = arc_funcs(p)
     quadratic_roots = arc.quadratic_roots
+    local_scale = arc.local_scale
     arc_path = nearest_arc_funcs(p).arc_path
     candidate = candidate_funcs(p, nearest_arc_funcs(p).sweep_arc, "brute").candidate
     bvh_box = bounds_funcs(p).bvh_box
@@ -333,17 +334,16 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
         The leg ends on the surface in the box's frame; far from the origin the world centre
         ``center + rotation x`` rounds to ulps of its coordinates, which can be far more than
         the band the arc sweep's start rules take as *on* the surface (``arc.TOUCH_ULPS`` of
-        the local scale; at 3 km, 1e-13 m against 4e-15 m), and a start deeper than that moving
-        out by rounding would be taken as leaving from inside. Such an end is moved out along
-        the normal to ``SEPARATION_ULPS`` of its coordinates above the surface
+        ``arc.local_scale``; at 3 km, 1e-13 m against 4e-15 m), and a start deeper than that
+        moving out by rounding would be taken as leaving from inside. Such an end is moved out
+        along the normal to ``SEPARATION_ULPS`` of its coordinates above the surface
         (``nearest.separation_lift``; the next sweep finds the entry just after); within the
         band (always, near the origin) it stays bit for bit.
         """
         x = to_local * (a - center)
         w = wp.cw_mul(mask, x - cf)
         size = wp.length(w)
-        scale = wp.max(wp.max(wp.max(h[0], h[1]), h[2]) + radius,
-                       wp.max(wp.max(wp.abs(x[0]), wp.abs(x[1])), wp.abs(x[2])))
+        scale = local_scale(x, h + vec3(radius, radius, radius))
         depth = radius - size
         out = a
         if size > ZERO and depth > TOUCH_REL * scale:

@@ -36,6 +36,7 @@ from test_arc_sweep import (
     edge_graze_arcs,
     entering_arc,
     random_case,
+    surface_point,
 )
 
 from warpsim.kernels.arc import arc_funcs
@@ -645,8 +646,8 @@ def test_edge_starts_leaving_by_rounding_held_or_not_float64():
     the tangent margin, far inside the touch band's rise): the curve holds it when ``u^2 / R <
     -g . n`` (in at once, ``s = 0``); faster it leaves the curve, and the next contact is a
     return to the edge or the landing on the top face (``4 s^2 - u sqrt(1/2) s + 1/2 - R
-    sqrt(1/2) = 0``), never ``s = 0``. (``arc.held_within_rounding``: the curvature term, its sign and the
-    edge/face count; float32 cannot hold the 2^-40.)"""
+    sqrt(1/2) = 0``), never ``s = 0``. (``arc.held_within_rounding``: the curvature term, its
+    sign and the edge/face count; float32 cannot hold the 2^-40.)"""
     point = np.array([1.0 + RB * SQ2, 0.5 + RB * SQ2, 0.0])
     out_v = 2.0**-40 * np.array([1.0, 1.0, 0.0])
     rows = [(0.5, 0.0), (np.sqrt(3.2), None), (np.sqrt(8.0), "top")]  # u^2 = 1/4, 3.2, 8
@@ -720,12 +721,10 @@ def axis_gravity_case(rng, kind):
     radius = rng.choice([0.05, 0.3]) if kind != "point" else rng.uniform(0.1, 0.5)
     g = np.zeros(3)
     g[rng.integers(3)] = rng.choice([-9.81, 9.81])
-    y = rng.uniform(-2.0, 2.0, 3) * (h + radius + 0.1)
-    core = np.clip(y, -h, h)
-    if np.linalg.norm(y - core) == 0.0:
+    drawn = surface_point(rng, h, radius)
+    if drawn is None:
         return None
-    normal = (y - core) / np.linalg.norm(y - core)
-    point = core + radius * normal
+    point, normal, _ = drawn
     tau = rng.uniform(0.5, 1.0)
     s_star = tau * rng.uniform(0.2, 0.6)
     arc = entering_arc(rng, point, normal, g, s_star)

@@ -360,16 +360,27 @@ def contact_case(rng, kind):
     radius = rng.choice([0.0, 0.05, 0.3]) if kind != "point" else rng.uniform(0.1, 0.5)
     g = rng.normal(0.0, 1.0, 3)
     g *= 9.81 / np.linalg.norm(g)
-    y = rng.uniform(-2.0, 2.0, 3) * (h + radius + 0.1)
-    core = np.clip(y, -h, h)
-    if np.linalg.norm(y - core) == 0.0 or (radius == 0.0 and np.sum(y != core) > 1):
+    drawn = surface_point(rng, h, radius)
+    if drawn is None or (radius == 0.0 and drawn[2] > 1):
         return None  # a sharp box is met on a face (its edges are lines: a touch, not a hit)
-    normal = (y - core) / np.linalg.norm(y - core)
-    point = core + radius * normal
+    point, normal, _ = drawn
     tau = rng.uniform(0.2, 1.0)
     s_star = tau * rng.uniform(0.2, 0.9)
     arc = entering_arc(rng, point, normal, g, s_star)
     return None if arc is None else (h, radius, *arc, g, tau)
+
+
+def surface_point(rng, h, radius):
+    """``(point, normal, outside)``: the point of the rounded box's surface (core half extents
+    ``h`` [m], radius [m]) nearest to a random point around it, in that point's direction from
+    the core, its outward unit normal, and on how many axes it lies outside the core slabs (1 a
+    face, 2 an edge, 3 a corner); None when the random point falls in the core."""
+    y = rng.uniform(-2.0, 2.0, 3) * (h + radius + 0.1)
+    core = np.clip(y, -h, h)
+    if np.linalg.norm(y - core) == 0.0:
+        return None
+    normal = (y - core) / np.linalg.norm(y - core)
+    return core + radius * normal, normal, int(np.sum(y != core))
 
 
 def entering_arc(rng, point, normal, g, s_star):

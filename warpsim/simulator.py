@@ -617,13 +617,21 @@ def _starts_in_free_flight(boxes, swarm: Swarm) -> bool:
     simulated apart could choose differently and differ by rounding: a run split into parts
     passes ``Simulator(free_flight=...)`` chosen for the whole run (the sharded runs and the
     command line take ``distributed.draw.may_start_free`` of the scene's emitter)."""
-    if len(boxes) == 0 or len(swarm) == 0:
+    if len(swarm) == 0:
+        return False
+    r = swarm.radius[:, None]
+    return reaches_beyond_bounds(boxes, swarm.position - r, swarm.position + r)
+
+
+def reaches_beyond_bounds(boxes, low_end, high_end) -> bool:
+    """Whether some sphere lies wholly beyond the box holding every obstacle's reject bounds
+    on some axis: its lowest point ``low_end`` [m] above that box, or its highest point
+    ``high_end`` [m] below it (arrays of shape (..., 3)); False without obstacles."""
+    if len(boxes) == 0:
         return False
     lower, upper = bvh_bounds(boxes.center, boxes.world_extent())
-    r = swarm.radius[:, None]
-    beyond = ((swarm.position - r > upper.max(axis=0))
-              | (swarm.position + r < lower.min(axis=0)))
-    return bool(beyond.any())
+    return bool(np.any(np.asarray(low_end) > upper.max(axis=0))
+                or np.any(np.asarray(high_end) < lower.min(axis=0)))
 
 
 def _host(array: wp.array) -> np.ndarray:

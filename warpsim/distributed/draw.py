@@ -169,17 +169,14 @@ def may_start_free(scene: Scene) -> bool:
     it on some axis): the free-flight step of the frame kernel for every part of a sharded run
     and for the one-process run of the same command alike (``Simulator(free_flight=...)``), so
     that they run the same kernel and agree bit for bit whatever spheres each part holds."""
-    from ..device import bvh_bounds
+    from ..simulator import reaches_beyond_bounds
 
-    boxes, emitter = scene.boxes, scene.emitter
-    if len(boxes) == 0:
-        return False
-    lower, upper = bvh_bounds(boxes.center, boxes.world_extent())
+    emitter = scene.emitter
     center = np.asarray(emitter.center, float)
     half = np.asarray(emitter.half_extents, float)
     r_min = float(np.min(emitter.radius))
-    return bool(np.any(center + half - r_min > upper.max(axis=0))
-                or np.any(center - half + r_min < lower.min(axis=0)))
+    # the highest lowest point and the lowest highest point a drawn sphere can have
+    return reaches_beyond_bounds(scene.boxes, center + half - r_min, center - half + r_min)
 
 
 SWARM_FIELDS = ("position", "velocity", "radius", "mass", "angular_momentum", "orientation",

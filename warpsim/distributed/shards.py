@@ -148,7 +148,6 @@ def scene_key(scene: Scene) -> str:
 
 def _simulator(scene: Scene, swarm: Swarm, spec: RunSpec):
     from ..simulator import Simulator
-
     from .draw import may_start_free
 
     return Simulator(scene, swarm, dt=spec.dt, max_bounces=spec.max_bounces, device=spec.device,
