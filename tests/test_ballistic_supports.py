@@ -410,8 +410,12 @@ def test_curved_slide_meets_the_next_box_with_every_broad_phase():
 #: once (``test_reference_supports.LIFT_GAP`` is 1e-11 m).
 ON_SURFACE = 1e-9
 
-#: Samples of the reference per frame checked on the way: the frame ends (the kernel's states).
+#: How long each random slide runs [s].
 SLIDE_SECONDS = 0.6
+
+#: Spacing [s] of the reference's samples that tell whether the sphere has ridden an edge or a
+#: corner by a frame's end (a curved slide can start and end between two frame ends).
+CURVE_SAMPLE = 1.0e-3
 
 
 def box_gap(box, x):
@@ -427,22 +431,13 @@ def box_gap(box, x):
     return gap, on_face
 
 
-@settings(max_examples=examples(24))
-@given(half=st.tuples(st.floats(0.2, 1.5), st.floats(0.1, 1.0), st.floats(0.2, 1.5)),
-       rb=st.sampled_from([0.0, 0.0, 0.03, 0.12]), r=st.sampled_from([0.05, 0.1, 0.2]),
-       tilt=st.floats(0.0, 0.6), tilt_axis=st.floats(0.0, 2 * np.pi),
-       yaw=st.floats(0.0, 2 * np.pi), start=st.tuples(st.floats(-0.9, 0.9), st.floats(-0.9, 0.9)),
-       speed=st.floats(0.0, 3.0), heading=st.floats(0.0, 2 * np.pi),
-       far=st.sampled_from([0.0, 0.0, 3.0e3]), dt=st.sampled_from(DTS))
-def test_random_slides_on_rotated_boxes_match_the_reference(half, rb, r, tilt, tilt_axis, yaw,
-                                                             start, speed, heading, far, dt):
-    """A sphere put on the top face of a box turned about the vertical and tilted up to 34
-    degrees about a random horizontal axis (sharp or rounded, at the origin or 3 km away),
-    sliding in a random direction at up to 3 m/s: the kernel's states at the frame ends, float64,
-    against the exact reference (``warpsim.analysis.reference``, written independently) at the
-    same times. While the sphere is on the face or has left it into free flight the motion is
-    piecewise parabolas with exact breaks: 1e-9 m (``FACE_TOL``), at any ``dt``; once it has
-    ridden an edge or a corner (a curved slide), the curved bounds (``CURVED_TOL``)."""
+def random_slide_errors(precision, half, rb, r, tilt, tilt_axis, yaw, start, speed, heading,
+                        far, dt):
+    """The kernel's error [m] at each frame end against the exact reference for a sphere put
+    on the top face of a turned and tilted box (:func:`test_random_slides_on_rotated_boxes_
+    match_the_reference`), and whether the reference has ridden an edge or a corner (a curved
+    slide) by then. float32 starts from the start rounded to it; the reference's motion is
+    shifted by that rounding."""
     tilt_q = quat_about((np.cos(tilt_axis), 0.0, np.sin(tilt_axis)), tilt)
     q = quat_mul(tilt_q, quat_about((0, 1, 0), yaw))
     shift = np.array([far, -0.3 * far, 0.6 * far])
@@ -453,19 +448,56 @@ def test_random_slides_on_rotated_boxes_match_the_reference(half, rb, r, tilt, t
     v0 = rot @ (speed * np.array([np.cos(heading), 0.0, np.sin(heading)]))
     frames = frames_for(SLIDE_SECONDS, dt)
     times = dt * np.arange(1, frames + 1)
+    # the frame ends, and samples every CURVE_SAMPLE s between them to see a curved slide
+    dense = np.union1d(times, np.arange(0.0, times[-1], CURVE_SAMPLE))
     scene = ws.Scene(box, gravity=G)
     truth = reference.simulate(scene, ws.Swarm(position=[x0], velocity=[v0], radius=r),
-                               float(times[-1]), times)
+                               float(times[-1]), dense)
     assert not truth.incomplete.any()
     assert not len(truth.events.of_sphere(0).bounces())
-    out = run(box, x0[None], v0[None], frames, dt, "float64", radius=r, record=True)
+    x_in = x0.astype(np.dtype(precision)).astype(float)
+    out = run(box, x_in[None], v0[None], frames, dt, precision, radius=r, record=True)
     assert out["capped"].sum() == 0
-    got = out["history"][:, 0]
-    want = truth.position[:, 0]
-    gap, on_face = box_gap(box, want)
-    curved = (np.abs(gap - (rb + r)) < ON_SURFACE) & ~on_face
-    tol = np.where(np.maximum.accumulate(curved), CURVED_TOL[dt], FACE_TOL["float64"])
-    err = np.linalg.norm(got - want, axis=1)
+    gap, on_face = box_gap(box, truth.position[:, 0])
+    ridden = np.maximum.accumulate((np.abs(gap - (rb + r)) < ON_SURFACE) & ~on_face)
+    at_ends = np.searchsorted(dense, times)
+    want = truth.position[at_ends, 0]
+    err = np.linalg.norm(out["history"][:, 0] - (want + (x_in - x0)), axis=1)
+    return err, ridden[at_ends]
+
+
+SLIDES = dict(half=st.tuples(st.floats(0.2, 1.5), st.floats(0.1, 1.0), st.floats(0.2, 1.5)),
+              rb=st.sampled_from([0.0, 0.0, 0.03, 0.12]), r=st.sampled_from([0.05, 0.1, 0.2]),
+              tilt=st.floats(0.0, 0.6), tilt_axis=st.floats(0.0, 2 * np.pi),
+              yaw=st.floats(0.0, 2 * np.pi),
+              start=st.tuples(st.floats(-0.9, 0.9), st.floats(-0.9, 0.9)),
+              speed=st.floats(0.0, 3.0), heading=st.floats(0.0, 2 * np.pi),
+              dt=st.sampled_from(DTS))
+
+
+@settings(max_examples=examples(24))
+@given(far=st.sampled_from([0.0, 0.0, 3.0e3]), **SLIDES)
+def test_random_slides_on_rotated_boxes_match_the_reference(far, **case):
+    """A sphere put on the top face of a box turned about the vertical and tilted up to 34
+    degrees about a random horizontal axis (sharp or rounded, at the origin or 3 km away),
+    sliding in a random direction at up to 3 m/s: the kernel's states at the frame ends, float64,
+    against the exact reference (``warpsim.analysis.reference``, written independently) at the
+    same times. While the sphere is on the face or has left it into free flight the motion is
+    piecewise parabolas with exact breaks: 1e-9 m (``FACE_TOL``), at any ``dt``; once it has
+    ridden an edge or a corner (a curved slide), the curved bounds (``CURVED_TOL``)."""
+    err, curved = random_slide_errors("float64", far=far, **case)
+    tol = np.where(curved, CURVED_TOL[case["dt"]], FACE_TOL["float64"])
+    assert np.all(err <= tol), (err.max(), int(np.argmax(err > tol)), curved.any())
+
+
+@settings(max_examples=examples(12))
+@given(**SLIDES)
+def test_random_slides_on_rotated_boxes_float32(**case):
+    """The same slides in float32, near the origin: the rounding of metre-sized coordinates,
+    ``FACE_TOL`` (2e-4 m) on the face and in flight, ``CURVED_TOL_F32`` (1e-3 m) once the
+    sphere has ridden an edge or a corner."""
+    err, curved = random_slide_errors("float32", far=0.0, **case)
+    tol = np.where(curved, CURVED_TOL_F32, FACE_TOL["float32"])
     assert np.all(err <= tol), (err.max(), int(np.argmax(err > tol)), curved.any())
 
 
