@@ -9,8 +9,10 @@ box's frame, then keep the closer contact (ties: the lower box index). Only the 
 depends on the path, and :func:`candidate_funcs` captures it: ``nearest.chord_funcs`` and
 ``nearest_arc.nearest_arc_funcs`` specialise the loops with the chord's or the arc's.
 
-The candidates come from every box (brute force), from the grid cell of the path's start (when
-the path's query box fits in the cell's margin), from the cells the path's chord crosses, walked
+The candidates come from every box (brute force), from the grid cell of the chord's midpoint
+(when the path's query box fits in the cell's margin: a path reaching ``|d_i| / 2 + r`` from its
+midpoint fits wherever the midpoint lies, so the margin, and the lists, need only half the
+path), from the cells the path's chord crosses, walked
 in order (:func:`candidate_funcs`' ``nearest_walk``), or from a BVH query (any order: hence the
 explicit tie rule). Brute force, the cell and the BVH only skip boxes the reject would refuse
 anyway; the walk skips boxes the path cannot touch before the nearest hit it has found (see
@@ -134,9 +136,12 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
         return out
 
     @wp.func
-    def grid_fits_path(a: vec3, b: vec3, grow: vec3, broad: BroadPhase):
+    def grid_fits_path(a: vec3, b: vec3, mid: vec3, grow: vec3, broad: BroadPhase):
         """``(fits, cell)``: whether the box spanned by ``a`` and ``b``, grown by ``grow`` per
-        axis, lies in the grown cell of ``a``, and that cell's linear index (x fastest).
+        axis, lies in the grown cell of ``mid`` (their midpoint [m], as the ``Path`` holds it),
+        and that cell's linear index (x fastest). Any cell would do (the test is against the
+        cell's own bounds); the midpoint's is the one a path fits best: wherever the midpoint
+        lies in it, a path fits when ``|b_i - a_i| / 2 + grow_i <= margin``.
 
         ``broad.margin`` is the margin the host listed the boxes for, less twice the rounding
         pad of any coordinate inside the grid (``BOUNDS_PAD_REL`` of the grid's largest
@@ -147,7 +152,7 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
         index = int(0)
         stride = int(1)
         for i in range(3):
-            c = int(wp.floor((a[i] - broad.lower[i]) * broad.inv_cell[i]))
+            c = int(wp.floor((mid[i] - broad.lower[i]) * broad.inv_cell[i]))
             if c < 0 or c >= broad.dims[i]:
                 fits = 0
             else:
@@ -162,8 +167,9 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
     @wp.func(inline=True)
     def grid_fits(q: Path, broad: BroadPhase):
         """:func:`grid_fits_path` for the path's query box (its chord's bounding box grown by
-        ``grow (1 + REJECT_SLACK)``): then only the cell's boxes can pass :func:`apart`."""
-        return grid_fits_path(q.a, q.end, q.grow * SLACK, broad)
+        ``grow (1 + REJECT_SLACK)``) in the cell of the chord's midpoint: then only the cell's
+        boxes can pass :func:`apart`."""
+        return grid_fits_path(q.a, q.end, q.mid, q.grow * SLACK, broad)
 
     @wp.func(inline=True)
     def bvh_box(q: Path):

@@ -145,11 +145,11 @@ def model_structs(p: Precision) -> ModelStructs:
     class BroadPhase:
         """The candidate lookup: a BVH over the boxes' reject bounds and a uniform grid.
 
-        The grid is either the margin grid of ``"grid"`` (a path reads its start cell's list
-        when it stays within ``margin`` of that cell) or the walked grid of ``"walk"`` (a path
-        reads the lists of the cells its chord crosses, in order; ``reach``, ``scale`` and the
-        per-box cell ranges are its). A kernel built without one of them never reads it (a
-        single empty cell, a BVH id 0).
+        The grid is either the margin grid of ``"grid"`` (a path reads the list of the cell
+        holding its chord's midpoint when it stays within ``margin`` of that cell) or the
+        walked grid of ``"walk"`` (a path reads the lists of the cells its chord crosses, in
+        order; ``reach``, ``scale`` and the per-box cell ranges are its). A kernel built
+        without one of them never reads it (a single empty cell, a BVH id 0).
         """
 
         bvh: wp.uint64

@@ -5,8 +5,11 @@ borders, scenes far from the origin, both precisions; plus the grid's own invari
 lists every box whose reject bounds meet the cell grown by the margin.
 """
 
+from functools import cache
+
 import numpy as np
 import pytest
+import warp as wp
 from helpers import shaped_half_extents
 
 import warpsim as ws
@@ -136,3 +139,132 @@ def test_auto_picks_the_grid_for_the_standard_room(device):
     scene = ws.Scene.load("room")
     sim = ws.Simulator(scene, scene.spawn(n=100, seed=0), device=device)
     assert sim.broad_phase == "grid"
+
+
+@pytest.mark.parametrize("motion", ["linear", "ballistic"])
+def test_paths_with_midpoints_on_cell_borders(device, precision, motion):
+    """The grid reads the cell of the chord's midpoint: midpoints put exactly on cell borders
+    (in the kernels' float type; the kernel's own midpoint rounds to either side), along one,
+    two or three axes, give brute force's bits, for the chord and for the arc (whose chord
+    ends where the arc does)."""
+    rng = np.random.default_rng(11)
+    boxes, side = random_scene(60, rng)
+    dtype = np.float32 if precision == "float32" else np.float64
+    g = np.array([0.0, -9.81 if motion == "ballistic" else 0.0, 0.0])
+    n = 3000
+    d = rng.normal(size=(n, 3))
+    vel = d / np.linalg.norm(d, axis=1)[:, None] * rng.uniform(0.5, 30.0, (n, 1))
+    rad = rng.uniform(0.0, 0.05, n)
+    grid = broad.build_grid(boxes, broad.paths(np.zeros((n, 3)), vel, rad, g, DT).margin,
+                            dtype)
+    cells = rng.integers(0, grid.dims, (n, 3))
+    mid = grid.lower + cells * grid.cell
+    on = rng.random((n, 3)) < 0.7  # the other axes anywhere in the cell
+    mid = np.where(on, mid, mid + rng.random((n, 3)) * grid.cell).astype(dtype)
+    chord = (vel + g * DT / 2) * DT
+    pos = mid.astype(np.float64) - chord / 2
+    keep = boxes.signed_distance(pos).min(axis=1) > rad + 1e-3
+    runs = {bp: ws.bounce(pos[keep], vel[keep], rad[keep], boxes, DT, precision=precision,
+                          broad_phase=bp, motion=motion, gravity=g, max_bounces=16,
+                          device=device)
+            for bp in ("brute", "grid")}
+    same(runs["brute"], runs["grid"], FIELDS)
+    assert runs["brute"].bounces.sum() > 0
+
+
+@pytest.mark.parametrize("start", ["room", "drop"])
+def test_the_margin_holds_for_the_run(device, start):
+    """The margin (``broad_phase.reach``) is made for the speed a sphere can reach, not only
+    the first frame's: in the standard room at 5 m/s, and for spheres released at rest under
+    the ceiling (whose first frame is almost no path), at least ``REACH_QUANTILE`` of the
+    sphere-frames of a 2-second run fit the cell of their midpoint (each frame's displacement,
+    at most its chord, within the margin of its midpoint's cell on every axis)."""
+    scene = ws.Scene.load("room")
+    swarm = scene.spawn(n=1000, seed=4)
+    if start == "drop":
+        pos = swarm.position.copy()
+        pos[:, 1] = 5.5
+        swarm = ws.Swarm(pos, np.zeros_like(pos), radius=swarm.radius)
+    sim = ws.Simulator(scene, swarm, broad_phase="grid", device=device)
+    assert sim.broad_phase == "grid"
+    margin = sim._grid.kernel_margin
+    path = sim.run(120).position
+    half = np.abs(np.diff(path, axis=0)).max(axis=2) / 2
+    grow = np.asarray(swarm.radius) * (1.0 + broad.REJECT_SLACK)
+    fits = half + grow[None, :] <= margin
+    assert fits.mean() >= broad.REACH_QUANTILE, fits.mean()
+    if start == "drop":  # the first frame alone would have made a margin far too small
+        first = broad.paths(swarm.position, swarm.velocity, swarm.radius, scene.gravity,
+                            scene.dt)
+        assert (half + grow[None, :] <= first.margin).mean() < 0.5
+
+
+@cache
+def fits_kernel(name: str):
+    from warpsim.kernels.candidates import bounds_funcs
+    from warpsim.kernels.data import model_structs
+    from warpsim.kernels.precision import precision as types_of
+    from warpsim.kernels.variant import variant_kernel
+
+    p = types_of(name)
+    grid_fits_path = bounds_funcs(p).grid_fits_path
+    BroadPhase = model_structs(p).BroadPhase
+
+    @variant_kernel
+    def run(broad: BroadPhase, a: wp.array[p.vec3], b: wp.array[p.vec3],
+            grow: wp.array[p.vec3], fits_out: wp.array[wp.int32],
+            cell_out: wp.array[wp.int32]):
+        i = wp.tid()
+        fits, cell = grid_fits_path(a[i], b[i], p.scalar(0.5) * (a[i] + b[i]), grow[i], broad)
+        fits_out[i] = fits
+        cell_out[i] = cell
+
+    return run
+
+
+def test_a_path_fits_the_cell_of_its_midpoint(precision):
+    """``grid_fits_path`` over random paths (short, near the margin, longer than it; midpoints
+    on and off cell borders): a path it accepts has every box its query box meets listed in
+    the cell it names (float64 check on the host's lists), and every path within the margin of
+    its midpoint's cell (half its extent plus its growth at most the margin, less rounding) is
+    accepted, wherever in the cell its midpoint lies."""
+    from warpsim.kernels.precision import precision as types_of
+    from warpsim.model import put_model
+
+    p = types_of(precision)
+    rng = np.random.default_rng(5)
+    boxes, side = random_scene(40, rng)
+    margin = 0.35
+    grid = broad.build_grid(boxes, margin, p.np_dtype)
+    model = put_model(boxes, p, "cpu", broad_phase="grid", grid=grid, dt=DT)
+    n = 20_000
+    mid = grid.lower + rng.uniform(0, 1, (n, 3)) * grid.dims * grid.cell
+    border = rng.random((n, 3)) < 0.3
+    mid = np.where(border, grid.lower + np.round((mid - grid.lower) / grid.cell) * grid.cell,
+                   mid).astype(p.np_dtype).astype(np.float64)
+    half = rng.uniform(0, 1.3 * margin, (n, 3)) * rng.choice([-1, 1], (n, 3))
+    grow = rng.uniform(0, 0.3 * margin, (n, 3))
+    a, b = mid - half, mid + half
+    arr = {k: wp.array(v.astype(p.np_dtype), dtype=p.vec3, device="cpu")
+           for k, v in (("a", a), ("b", b), ("grow", grow))}
+    fits = wp.zeros(n, dtype=wp.int32, device="cpu")
+    cell = wp.zeros(n, dtype=wp.int32, device="cpu")
+    wp.launch(fits_kernel(precision), dim=n, inputs=[model.broad, arr["a"], arr["b"],
+              arr["grow"], fits, cell], device="cpu")
+    fits, cell = fits.numpy().astype(bool), cell.numpy()
+    a, b, grow = (arr[k].numpy().astype(np.float64) for k in ("a", "b", "grow"))
+    # accepted: every box the query box meets is in the named cell's list
+    lo32, hi32 = bvh_bounds(boxes.center.astype(np.float32),
+                            boxes.world_extent().astype(np.float32))
+    q_lo, q_hi = np.minimum(a, b) - grow, np.maximum(a, b) + grow
+    meets = np.all((q_lo[:, None] <= hi32[None]) & (q_hi[:, None] >= lo32[None]), axis=2)
+    for i in np.flatnonzero(fits):
+        listed = grid.cell_boxes[grid.cell_start[cell[i]]:grid.cell_start[cell[i] + 1]]
+        assert set(np.flatnonzero(meets[i])) <= set(listed), i
+    # within the margin of the midpoint's cell: accepted
+    reach = (np.abs(b - a) / 2 + grow).max(axis=1)
+    at = ((a + b) / 2 - grid.lower) / grid.cell  # in cells; the grid's outer faces round
+    inside = np.all((at > 1e-4) & (at < grid.dims - 1e-4), axis=1)
+    surely = inside & (reach <= grid.kernel_margin * (1 - 1e-4))
+    assert surely.sum() > n // 4 and (~surely).sum() > n // 10
+    assert np.all(fits[surely]), np.flatnonzero(surely & ~fits)[:5]

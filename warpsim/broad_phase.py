@@ -7,10 +7,11 @@ the lower index, and each skips only boxes the path cannot hit before the first 
 - ``"bvh"``: a query of a BVH over the boxes' reject bounds (Warp's ``wp.Bvh``). Best for many
   boxes and fast spheres.
 - ``"grid"``: a uniform grid over the scene whose cells list the boxes within ``margin`` of the
-  cell. A sphere whose path (grown by its radius) stays within its cell's margin reads that
-  short list only; any other falls back to every box, or to the BVH (``"grid-bvh"``). Best when
-  a frame's path is short against the scene: the standard room's spheres see one or two boxes
-  instead of 22.
+  cell. A sphere whose path (grown by its radius) stays within the margin of the cell holding
+  the path's midpoint reads that short list only (a path fits when half its extent plus the
+  radius is within the margin, so the margin follows half a frame's path: :func:`reach`); any
+  other falls back to every box, or to the BVH (``"grid-bvh"``). Best when a frame's path is
+  short against the scene: the standard room's spheres see one or two boxes instead of 22.
 - ``"walk"``: a uniform grid whose cells list the boxes within the spheres' radius (plus the
   arc's sagitta) of the cell; a path reads the lists of the cells its chord crosses, in order
   (3D-DDA), tries each box once, and stops at the first cell beyond the nearest contact found.
@@ -37,12 +38,17 @@ from .kernels.candidates import BOUNDS_PAD_ABS, BOUNDS_PAD_REL, REJECT_SLACK, WA
 from .kernels.data import WALK_FLAG_BITS
 from .obstacles import RoundedBoxes
 
-#: The grid's margin is the reach of this share of the spheres' first frame (path length plus
-#: radius): the rest, and spheres that speed up later, fall back to the slower method.
+#: The grid's margin is the reach of this share of the spheres' frames (half the path plus the
+#: radius, at the speed a sphere can reach: see :func:`reach`): the rest fall back to the slower
+#: method.
 REACH_QUANTILE = 0.95
 
-#: Margin over the measured reach: speeds change over a run (gravity, bounces).
-REACH_FACTOR = 1.5
+#: Margin over the measured reach: collisions turn speed between the axes and bounces turn it
+#: upward (a path's extent on one axis is at most its length, which the reach already bounds).
+REACH_FACTOR = 1.25
+
+#: Spheres (evenly spaced in the swarm) whose first frame the margin grid's cost is measured on.
+COST_SAMPLE = 4096
 
 #: Most cells a grid may have (its cell table is 4 bytes a cell).
 MAX_CELLS = 1 << 21
@@ -114,6 +120,14 @@ class CellLists:
         """Boxes listed per cell, averaged over the cells."""
         return float(len(self.cell_boxes)) / max(self.cells, 1)
 
+    def list_lengths(self, points: np.ndarray) -> np.ndarray:
+        """Boxes listed in the cell holding each point [m], (S, 3) -> (S,); 0 outside."""
+        c = np.floor((np.asarray(points) - self.lower) / self.cell).astype(np.int64)
+        inside = np.all((c >= 0) & (c < self.dims), axis=1)
+        c = np.where(inside[:, None], c, 0)
+        cell = c[:, 0] + self.dims[0] * (c[:, 1] + self.dims[1] * c[:, 2])
+        return np.where(inside, self.cell_start[cell + 1] - self.cell_start[cell], 0)
+
 
 @dataclass
 class Grid(CellLists):
@@ -144,14 +158,39 @@ class Grid(CellLists):
 
 
 def reach(position: np.ndarray, velocity: np.ndarray, radius: np.ndarray, gravity, dt: float,
-          ) -> float:
-    """How far a typical sphere's first frame reaches [m]: path ``(|v| + |g| dt) dt`` plus the
-    radius, at the ``REACH_QUANTILE`` of the swarm, times ``REACH_FACTOR``."""
+          floor: np.ndarray | None = None) -> float:
+    """The margin grid's margin [m]: how far beyond the cell of its midpoint a typical sphere's
+    frame path reaches.
+
+    A path's query box (its chord's bounding box grown by the radius) lies within ``|d_i| / 2 +
+    r`` of its midpoint along each axis, so it fits the cell of its midpoint grown by that
+    much. The chord is at most ``(|v| + |g| dt) dt`` long, with ``|v|`` the highest speed the
+    sphere can reach: energy bounds it by ``sqrt(|v0|^2 + 2 |g| h)``, ``h`` [m] the sphere's
+    height above ``floor`` (the lowest point of the boxes' bounds along gravity; none: the
+    start speed), which is what a slow sphere falling to the floor gains. The margin is that
+    half path plus the radius at the ``REACH_QUANTILE`` of the swarm, times ``REACH_FACTOR``."""
     if len(position) == 0:
         return 0.0
-    speed = np.linalg.norm(velocity, axis=1) + float(np.linalg.norm(gravity)) * dt
-    path = speed * dt + radius
-    return REACH_FACTOR * float(np.quantile(path, REACH_QUANTILE))
+    g = np.asarray(gravity, dtype=np.float64)
+    g_len = float(np.linalg.norm(g))
+    speed2 = np.einsum("ij,ij->i", velocity, velocity).astype(np.float64)
+    if floor is not None and g_len > 0.0:
+        drop = np.maximum((np.asarray(position, dtype=np.float64) - floor) @ (g / -g_len), 0.0)
+        speed2 = speed2 + 2.0 * g_len * drop
+    half_path = 0.5 * (np.sqrt(speed2) + g_len * dt) * dt
+    return REACH_FACTOR * float(np.quantile(half_path + radius, REACH_QUANTILE))
+
+
+def floor_point(boxes: RoundedBoxes, gravity) -> np.ndarray | None:
+    """The corner of the boxes' overall reject bounds lowest along ``gravity`` [m], (3,): no
+    sphere among them falls below it (None without boxes or gravity)."""
+    g = np.asarray(gravity, dtype=np.float64)
+    if len(boxes) == 0 or not np.any(g):
+        return None
+    extent = boxes.world_extent()
+    lo = (boxes.center - extent).min(axis=0)
+    hi = (boxes.center + extent).max(axis=0)
+    return np.where(g > 0.0, hi, lo)
 
 
 def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32) -> Grid | None:
@@ -241,25 +280,36 @@ class Paths:
             arc (``|g| dt^2 / 8``), with ``WALK_REACH_HEADROOM``.
         mean_path: the mean of ``|d_i|`` over the swarm per world axis [m], (3,): a frame's
             chord (``(|v| + |g| dt) dt`` along the velocity), for the walk's cost.
+        midpoint, half_extent: for the margin grid's cost, a sample of at most
+            ``COST_SAMPLE`` spheres' first-frame chords: their midpoints and half extents per
+            axis plus the radius [m], (S, 3) each; None: the grid's cost is its mean list.
     """
 
     margin: float
     reach: float
     mean_path: np.ndarray
+    midpoint: np.ndarray | None = None
+    half_extent: np.ndarray | None = None
 
 
 def paths(position: np.ndarray, velocity: np.ndarray, radius: np.ndarray, gravity, dt: float,
-          ) -> Paths:
-    """The :class:`Paths` of a swarm's first frame (``position`` (N, 3) [m], ``velocity``
-    (N, 3) [m/s], ``radius`` (N,) [m], ``gravity`` [m/s^2], ``dt`` [s])."""
+          boxes: RoundedBoxes | None = None) -> Paths:
+    """The :class:`Paths` of a swarm's frames (``position`` (N, 3) [m], ``velocity`` (N, 3)
+    [m/s], ``radius`` (N,) [m], ``gravity`` [m/s^2], ``dt`` [s]); with ``boxes``, the grid's
+    margin allows for the speed a sphere gains falling to their lowest point (:func:`reach`;
+    without, a single query's first frame)."""
     g = np.asarray(gravity, dtype=np.float64)
     if len(position) == 0:
         return Paths(margin=0.0, reach=0.0, mean_path=np.zeros(3))
     sagitta = float(np.max(np.abs(g))) * dt * dt / 8.0
     step = np.abs(velocity) * dt + np.abs(g) * dt * dt
-    return Paths(margin=reach(position, velocity, radius, g, dt),
+    floor = None if boxes is None else floor_point(boxes, g)
+    some = np.linspace(0, len(position) - 1, min(len(position), COST_SAMPLE)).astype(np.int64)
+    chord = (velocity[some] + g * (dt / 2)) * dt
+    return Paths(margin=reach(position, velocity, radius, g, dt, floor),
                  reach=(float(np.max(radius)) + sagitta) * (1.0 + WALK_REACH_HEADROOM),
-                 mean_path=step.mean(axis=0))
+                 mean_path=step.mean(axis=0), midpoint=position[some] + chord / 2,
+                 half_extent=np.abs(chord) / 2 + np.asarray(radius)[some, None])
 
 
 @dataclass
@@ -394,6 +444,20 @@ def exhaustive(box_count: int) -> tuple[str, float]:
     return "brute", BRUTE_FIXED + box_count
 
 
+def grid_cost(grid: Grid, frame: Paths, fallback_cost: float) -> float:
+    """The cost model of one query through the margin grid: ``GRID_FIXED`` plus the list of the
+    cell holding the path's midpoint, or the fallback's cost for a path that does not fit
+    (half its extent plus the radius beyond the margin, or outside the grid), averaged over
+    the sample of first frames in ``frame`` (without one: the mean list over the cells)."""
+    if frame.midpoint is None or not len(frame.midpoint):
+        return GRID_FIXED + grid.mean_list_length()
+    lengths = grid.list_lengths(frame.midpoint)
+    c = np.floor((frame.midpoint - grid.lower) / grid.cell)
+    fits = (np.all((c >= 0) & (c < grid.dims), axis=1)
+            & np.all(frame.half_extent * (1.0 + REJECT_SLACK) <= grid.kernel_margin, axis=1))
+    return GRID_FIXED + float(np.mean(np.where(fits, lengths, fallback_cost)))
+
+
 def estimates(boxes: RoundedBoxes, frame: Paths, dtype=np.float32) -> dict:
     """Every broad phase the scene can run, with its cost by the model and its grid.
 
@@ -410,7 +474,7 @@ def estimates(boxes: RoundedBoxes, frame: Paths, dtype=np.float32) -> dict:
     suffix = "-bvh" if fallback == "bvh" else ""
     grid = build_grid(boxes, frame.margin, dtype)
     if grid is not None:
-        out["grid" + suffix] = (GRID_FIXED + grid.mean_list_length(), grid)
+        out["grid" + suffix] = (grid_cost(grid, frame, fallback_cost), grid)
     walk = build_walk_grid(boxes, frame.reach, frame.mean_path, dtype)
     if walk is not None:
         out["walk" + suffix] = (walk.cost, walk)

@@ -187,7 +187,8 @@ class Simulator:
                                         self.max_bounces)
         """Texts of the :class:`warpsim.PrecisionWarning` s this set-up raised."""
         feasibility.check_outside(scene.boxes, swarm.position, swarm.radius, self.precision)
-        frame = broad.paths(swarm.position, swarm.velocity, swarm.radius, scene.gravity, self.dt)
+        frame = broad.paths(swarm.position, swarm.velocity, swarm.radius, scene.gravity, self.dt,
+                            scene.boxes)
         dtype = fp.precision(self.precision).np_dtype
         self.requested_broad_phase = str(check.broad_phase(broad_phase))
         """The broad phase asked for; :attr:`broad_phase` is the one that runs."""

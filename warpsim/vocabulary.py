@@ -30,8 +30,8 @@ class BroadPhase(StrEnum):
     BVH = "bvh"
     """A bounding-volume hierarchy of the boxes."""
     GRID = "grid"
-    """A uniform grid of the boxes: the start cell's list, for paths that stay near their cell
-    (falling back to the BVH or every box for the others)."""
+    """A uniform grid of the boxes: the list of the cell holding the path's midpoint, for paths
+    that stay near that cell (falling back to the BVH or every box for the others)."""
     WALK = "walk"
     """A uniform grid walked along each path: the lists of the cells the path crosses, in
     order, up to the first contact (its cost follows the path, not the speed)."""

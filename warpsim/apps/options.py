@@ -24,9 +24,9 @@ def add_simulation_options(parser: argparse.ArgumentParser, integer: Callable = 
                         help="CPU threads stepping the swarm (default: every core)")
     parser.add_argument("--broad-phase", default=BroadPhase.AUTO, choices=tuple(BroadPhase),
                         help="candidate boxes per sphere: every box (brute), a BVH (bvh), a "
-                             "uniform grid's start cell (grid), the grid's cells along each "
-                             "path (walk), or chosen from a cost model (auto); the same "
-                             "results; the summary says which ran")
+                             "uniform grid's cell at the path's midpoint (grid), the grid's "
+                             "cells along each path (walk), or chosen from a cost model "
+                             "(auto); the same results; the summary says which ran")
     parser.add_argument("--motion", choices=tuple(Motion),
                         help="path within a frame: the chord or the exact parabola (default: "
                              "the scene's)")
