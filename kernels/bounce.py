@@ -143,8 +143,9 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
         support = vec3(ZERO, ZERO, ZERO)  # normal of the last resting contact
         done = int(0)
         travelled = ZERO  # fraction of the frame's path behind the sphere
+        left = int(-1)  # the box the rest of the path leaves (it cannot meet it again)
         while done == 0:
-            box, t, n = nearest_hit(a, d, r, boxes, broad)
+            box, t, n = nearest_hit(a, d, r, left, boxes, broad)
             if box < 0:
                 a = a + d
                 done = 1
@@ -184,6 +185,12 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
                         d = d * keep
                 d = clip_rise(contact, d, w, m, g, physics.origin, energy)
                 a = contact
+                # the rest leaves the box's surface (or runs along it): a straight path from
+                # a convex body's surface that does not point into it never enters it, so the
+                # next query skips the box; a rest the rise cut turned inward tries it again
+                left = int(-1)
+                if wp.dot(d, n) >= ZERO:
+                    left = box
         # the velocity at the frame's end: the second half kick; a support takes its part into
         # the surface (the sphere ends on it, its normal velocity 0, as at the frame's start)
         v = w + half_kick

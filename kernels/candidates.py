@@ -81,6 +81,10 @@ def path_struct(p: Precision):
         """What the chord's bounding box grows by per world axis [m]: ``r`` (+ the sagitta)."""
         end: vec3
         """End of the path [m]."""
+        left: int
+        """A box the path cannot meet, not tried (-1: none): the one a chord has just bounced
+        off, its rest leaving the surface (the rounded box is convex, so a straight path from
+        its surface outward never enters it again)."""
 
     return Path
 
@@ -105,6 +109,7 @@ def path_funcs(p: Precision):
         q.half_d = vec3(HALF * wp.abs(d[0]), HALF * wp.abs(d[1]), HALF * wp.abs(d[2]))
         q.grow = grow
         q.end = a + d
+        q.left = -1
         return q
 
     return make_path
@@ -234,15 +239,16 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
     @wp.func(inline=True)
     def candidate(q: Path, boxes: Boxes, k: int, best: int, best_t: scalar, best_n: vec3):
         """Box ``k`` against the best so far: the reject, the exact sweep, and the closer of the
-        two contacts kept (ties: the lower box index)."""
-        center = boxes.center[k]
-        if apart(q, center, boxes.extent[k]) == 0:
-            hit, t, normal = exact(q, center, boxes.rotation[k], boxes.half_extents[k],
-                                   boxes.radius[k])
-            if hit == 1 and (best < 0 or t < best_t or (t == best_t and k < best)):
-                best = k
-                best_t = t
-                best_n = normal
+        two contacts kept (ties: the lower box index); never the box the path has left."""
+        if k != q.left:
+            center = boxes.center[k]
+            if apart(q, center, boxes.extent[k]) == 0:
+                hit, t, normal = exact(q, center, boxes.rotation[k], boxes.half_extents[k],
+                                       boxes.radius[k])
+                if hit == 1 and (best < 0 or t < best_t or (t == best_t and k < best)):
+                    best = k
+                    best_t = t
+                    best_n = normal
         return best, best_t, best_n
 
     @wp.func(inline=True)

@@ -51,7 +51,7 @@ def collide_kernel(features: Features):
                       broad: BroadPhase):
         """``(box, t, contact, normal, new_position, new_velocity)`` of the segment."""
         d = v * physics.dt
-        box, t, n = nearest_hit(a, d, r, boxes, broad)
+        box, t, n = nearest_hit(a, d, r, -1, boxes, broad)
         contact = a + t * d
         new_v = v
         new_p = contact

@@ -120,9 +120,11 @@ def model_nearest_hit(p: Precision, broad_phase: str):
             every one gives bit-identical results.
 
     Returns:
-        ``nearest_hit(a, d, r, boxes, broad) -> (box, t, normal)``: the first contact of the
-        sphere of radius ``r`` moving from ``a`` by ``d`` (smallest ``t``; ties: the lower box
-        index); ``box`` is -1 when nothing is hit (then ``t = 1``, normal 0).
+        ``nearest_hit(a, d, r, left, boxes, broad) -> (box, t, normal)``: the first contact of
+        the sphere of radius ``r`` moving from ``a`` by ``d`` (smallest ``t``; ties: the lower
+        box index) over every box but ``left`` (the box the chord has just bounced off and
+        leaves, which it cannot meet again; -1: none); ``box`` is -1 when nothing is hit (then
+        ``t = 1``, normal 0).
     """
     scalar, vec3 = p.scalar, p.vec3
     Boxes, BroadPhase, _, _ = model_structs(p)
@@ -131,8 +133,11 @@ def model_nearest_hit(p: Precision, broad_phase: str):
     nearest = candidate_funcs(p, funcs.sweep_chord, broad_phase).nearest
 
     @wp.func(inline=True)
-    def nearest_hit(a: vec3, d: vec3, r: scalar, boxes: Boxes, broad: BroadPhase):
-        """First contact of the sphere over the boxes, by the broad phase compiled in."""
-        return nearest(chord_path(a, d, r), boxes, broad)
+    def nearest_hit(a: vec3, d: vec3, r: scalar, left: int, boxes: Boxes, broad: BroadPhase):
+        """First contact of the sphere over the boxes but ``left``, by the broad phase compiled
+        in."""
+        q = chord_path(a, d, r)
+        q.left = left
+        return nearest(q, boxes, broad)
 
     return nearest_hit

@@ -168,7 +168,7 @@ def model_nearest_hit_arc(p: Precision, broad_phase: str):
         s = tau
         normal = vec3(ZERO, ZERO, ZERO)
         if g[0] == ZERO and g[1] == ZERO and g[2] == ZERO:  # the chord's own query
-            box, t, normal = nearest_chord(a, v * tau, r, boxes, broad)
+            box, t, normal = nearest_chord(a, v * tau, r, -1, boxes, broad)
             if box >= 0:
                 s = t * tau
         else:

@@ -90,7 +90,7 @@ def sweep_kernel(precision_name: str):
         bvh_box[i] = box
         bvh_s[i] = s
         bvh_normal[i] = n
-        box, t, n = nearest_hit(a, v * tau, r, boxes, broad)
+        box, t, n = nearest_hit(a, v * tau, r, -1, boxes, broad)
         linear_box[i] = box
         linear_t[i] = t
         linear_normal[i] = n

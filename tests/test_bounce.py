@@ -484,3 +484,40 @@ def test_a_straight_hit_is_a_bounce_not_a_support():
     wall = ws.RoundedBox(center=(1.0, 0.0, 0.0), half_extents=(0.1, 1.0, 1.0))
     b = ws.bounce([[0.0, 0.0, 0.0]], [[1.0, 0.0, 0.0]], 0.1, wall, 1.0, device="cpu")
     assert (b.hit[0], b.bounces[0], b.supports[0]) == (True, 1, 0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(tilt=st.floats(3.0, 60.0), turn=st.floats(0.0, 360.0),
+       rounding=st.sampled_from([0.0, 0.05]), height=st.floats(0.0, 0.03),
+       side_speed=st.floats(0.0, 3.0), heading=st.floats(-90.0, 90.0),
+       dt=st.sampled_from([1 / 240, 1 / 60, 0.1, 0.25]), retention=st.sampled_from([1.0, 0.6]),
+       precision=st.sampled_from(["float32", "float64"]))
+def test_low_hops_on_a_ramp_never_end_inside(tilt, turn, rounding, height, side_speed, heading,
+                                             dt, retention, precision):
+    """Hops too low for the chord's rest of the path (the rise cut turns it back toward the
+    ramp), mostly uphill, on a tilted, turned box: every frame's centre stays outside the ramp by the radius
+    (to rounding), against the host's float64 distance. The next query after a bounce skips
+    the box the rest leaves only when the rest does not point into it."""
+    a, b = math.radians(tilt), math.radians(turn)
+    axis = np.array([math.cos(b), 0.0, math.sin(b)])
+    q = np.array([*(math.sin(a / 2) * axis), math.cos(a / 2)])  # (x, y, z, w)
+    ramp = ws.RoundedBoxes(center=[[0.0, 0.0, 0.0]], half_extents=[[1.5, 0.1, 1.5]],
+                           rotation=[q], radius=[rounding])
+    normal = ramp.rotation_matrices()[0] @ np.array([0.0, 1.0, 0.0])
+    r = 0.05
+    top = normal * (0.1 + rounding + r + height)
+    uphill = np.array([0.0, 1.0, 0.0]) - normal[1] * normal  # up the slope, in its plane
+    uphill /= np.linalg.norm(uphill)
+    across = np.cross(normal, uphill)
+    h = math.radians(heading)
+    swarm = ws.Swarm([top], [side_speed * (math.cos(h) * uphill + math.sin(h) * across)],
+                     radius=r)
+    scene = ws.Scene(ramp, dt=dt, energy_retention=retention)
+    sim = ws.Simulator(scene, swarm, precision=precision, device="cpu")
+    path = sim.run(int(min(60, 1.2 / dt))).position[:, 0]
+    assert normal[1] > 0.4  # the top face, facing up
+    tol = 2e-5 if precision == "float32" else 1e-10
+    on_ramp = np.all(np.abs(np.linalg.solve(ramp.rotation_matrices()[0], path.T).T)[:, [0, 2]]
+                     < 1.5, axis=1)
+    gap = ramp.signed_distance(path)[:, 0] - r
+    assert np.all(gap[on_ramp] >= -tol), gap.min()
