@@ -497,8 +497,7 @@ def test_low_hops_on_a_ramp_never_end_inside(tilt, turn, rounding, height, side_
     """Hops too low for the chord's rest of the path (the rise cut turns it back toward the
     ramp), mostly uphill, on a tilted, turned box: every frame's centre stays outside the ramp
     by the radius (to rounding), against the host's float64 distance. The next query after a
-    bounce skips
-    the box the rest leaves only when the rest does not point into it."""
+    bounce skips the box the rest leaves only when the rest does not point into it."""
     a, b = math.radians(tilt), math.radians(turn)
     axis = np.array([math.cos(b), 0.0, math.sin(b)])
     q = np.array([*(math.sin(a / 2) * axis), math.cos(a / 2)])  # (x, y, z, w)
