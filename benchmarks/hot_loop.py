@@ -1,7 +1,7 @@
 """The frame kernel's cost at this commit against another one, side by side in one run.
 
 Run from the repository root: ``python -m benchmarks.hot_loop [--against REV] [--quick]
-[--repeats R] [--cases float32/linear,...] [--out PATH]``.
+[--repeats R] [--cases float32/linear,...] [--speeds 5,60] [--out PATH]``.
 
 A restructuring of the kernels (issue 16: scene data in structs, one candidate loop) must leave
 both the results and the hot loop's cost as they were. For each of float32/float64 and the
@@ -16,7 +16,9 @@ launching thread (``time.thread_time``: with ``workers=1`` the CPU launch runs i
 time a shared machine's other work holds the core is not counted; contention for caches still
 is, hence the best of many turns. The table gives the best ns per
 sphere-frame of each side, their ratio, and whether the final states are bit-identical (a
-SHA-256 of the state's bytes).
+SHA-256 of the state's bytes). With ``--speeds``, each case runs once per speed, the swarm drawn
+from the scene's emitter with its speed replaced (every direction), and each side's cost at the
+last speed against the first is printed (issue 20: 60 m/s against 5 m/s over a whole run).
 """
 
 from __future__ import annotations
@@ -40,14 +42,18 @@ CASES = [(prec, motion) for motion in ("linear", "ballistic") for prec in ("floa
 
 #: One process's measurement: prints one JSON line.
 CHILD = r"""
-import hashlib, json, sys, time
+import dataclasses, hashlib, json, sys, time
 import numpy as np
 import warp as wp
 wp.config.quiet = True
 import warpsim as ws
 prec, motion, n, frames, timings = sys.argv[1], sys.argv[2], *map(int, sys.argv[3:6])
 scene = ws.Scene.load(sys.argv[6])
-swarm = scene.spawn(n=n, seed=20240601)
+if sys.argv[7]:  # the emitter's speed replaced (every direction, as the standard room's)
+    emitter = dataclasses.replace(scene.emitter, count=n, speed=float(sys.argv[7]))
+    swarm = emitter.spawn(scene.boxes, seed=20240601)
+else:
+    swarm = scene.spawn(n=n, seed=20240601)
 best = float("inf")
 for _ in range(timings):
     sim = ws.Simulator(scene, swarm, precision=prec, motion=motion, workers=1, device="cpu")
@@ -81,13 +87,15 @@ def export_tree(rev: str, root: Path) -> Path:
 
 
 def measure(site: Path | None, prec: str, motion: str, n: int, frames: int,
-            timings: int, scene: str = "room") -> dict:
-    """One process's best time; ``site`` None is this checkout's installed package."""
+            timings: int, scene: str = "room", speed: float | None = None) -> dict:
+    """One process's best time; ``site`` None is this checkout's installed package; ``speed``
+    [m/s] replaces the emitter's (None: the scene's swarm)."""
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = str(site)
     out = subprocess.run([sys.executable, "-c", CHILD, prec, motion, str(n), str(frames),
-                          str(timings), scene], check=True, capture_output=True, text=True,
+                          str(timings), scene, "" if speed is None else repr(float(speed))],
+                         check=True, capture_output=True, text=True,
                          env=env, cwd=tempfile.gettempdir())
     result = json.loads(out.stdout.strip().splitlines()[-1])
     if site is not None and not result["file"].startswith(str(site)):
@@ -103,8 +111,14 @@ def main(argv=None) -> None:
                    help="bundled scene to advance (default room; plates is the ballistic one)")
     p.add_argument("--cases", default=None,
                    help="comma-separated PRECISION/MOTION pairs (default: all four)")
+    p.add_argument("--speeds", default=None,
+                   help="comma-separated emitter speeds [m/s] replacing the scene's, each a row "
+                        "(default: the scene's own swarm); with two, each side's cost at the "
+                        "last against the first is printed too")
     args = p.parse_args(argv)
     cases = CASES if args.cases is None else [tuple(c.split("/")) for c in args.cases.split(",")]
+    speeds = [None] if args.speeds is None else [float(s) for s in args.speeds.split(",")]
+    cases = [(prec, motion, speed) for prec, motion in cases for speed in speeds]
     started = time.perf_counter()
     _, info, out = start("hot_loop", args)
     n, frames = (5_000, 60) if args.quick else (20_000, 240)
@@ -114,30 +128,43 @@ def main(argv=None) -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         site = export_tree(rev, Path(tmp))
-        for prec, motion in cases:
+        for prec, motion, speed in cases:
             best = {"this": float("inf"), "base": float("inf")}
             hashes = {}
             for _ in range(repeats):
                 for side, where in (("base", site), ("this", None)):
-                    r = measure(where, prec, motion, n, frames, 3, args.scene)
+                    r = measure(where, prec, motion, n, frames, 3, args.scene, speed)
                     best[side] = min(best[side], r["seconds"])
                     hashes[side] = r["hash"]
             ns = {k: v / (n * frames) * 1e9 for k, v in best.items()}
-            rows.append({"precision": prec, "motion": motion, "broad_phase": r["broad_phase"],
+            rows.append({"precision": prec, "motion": motion, "speed": speed or "scene",
+                         "broad_phase": r["broad_phase"],
                          "base_ns": ns["base"], "this_ns": ns["this"],
                          "ratio": ns["this"] / ns["base"],
                          "identical": "yes" if hashes["this"] == hashes["base"] else "NO",
                          "base_s": best["base"], "this_s": best["this"]})
-            print(f"  {prec} {motion}: {ns['base']:.2f} -> {ns['this']:.2f} ns", flush=True)
+            print(f"  {prec} {motion} {speed or ''}: {ns['base']:.2f} -> {ns['this']:.2f} ns",
+                  flush=True)
     print_table(f"Frame kernel, scene {args.scene}, N = {n:,}, F = {frames}, one core, best of "
                 f"{repeats} x 3: {rev} against this checkout",
                 rows, [("precision", "precision", "s"), ("motion", "motion", "s"),
-                       ("broad phase", "broad_phase", "s"),
+                       ("m/s", "speed", ""), ("broad phase", "broad_phase", "s"),
                        (f"{rev} [ns]", "base_ns", ".2f"), ("this [ns]", "this_ns", ".2f"),
                        ("ratio", "ratio", ".3f"), ("identical", "identical", "s")])
+    speed_ratios = {}
+    if len(speeds) > 1:
+        for prec, motion in {(row["precision"], row["motion"]) for row in rows}:
+            by = {row["speed"]: row for row in rows
+                  if (row["precision"], row["motion"]) == (prec, motion)}
+            first, last = by[speeds[0]], by[speeds[-1]]
+            for side in ("base", "this"):
+                key = f"{prec}/{motion}/{side}"
+                speed_ratios[key] = last[f"{side}_ns"] / first[f"{side}_ns"]
+                print(f"{prec} {motion}, {rev if side == 'base' else 'this'}: "
+                      f"{speeds[-1]:g} m/s costs {speed_ratios[key]:.2f}x {speeds[0]:g} m/s")
     finish(out, {"machine": info, "against": rev, "scene": args.scene, "spheres": n,
-                 "frames": frames,
-                 "repeats": repeats, "rows": rows}, started)
+                 "frames": frames, "repeats": repeats, "rows": rows,
+                 "speed_ratios": speed_ratios}, started)
 
 
 if __name__ == "__main__":

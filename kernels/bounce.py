@@ -94,14 +94,15 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
         g_len = wp.length(g)
         if g_len > ZERO:
             down = g / g_len
-            side = v - wp.dot(v, down) * down
-            ep_c = potential(m, g, contact, origin)
-            spare = energy - ep_c - HALF * m * wp.dot(side, side)
-            allowed = wp.max(spare, ZERO) / (m * g_len)
             rise = -wp.dot(d, down)
-            slack = RESET_SLACK * (wp.abs(energy) + wp.abs(ep_c)) / (m * g_len)
-            if rise - allowed > slack:
-                out = d + (rise - allowed) * down
+            if rise > ZERO:  # else nothing to cut (``allowed`` and the slack are >= 0)
+                side = v - wp.dot(v, down) * down
+                ep_c = potential(m, g, contact, origin)
+                spare = energy - ep_c - HALF * m * wp.dot(side, side)
+                allowed = wp.max(spare, ZERO) / (m * g_len)
+                slack = RESET_SLACK * (wp.abs(energy) + wp.abs(ep_c)) / (m * g_len)
+                if rise - allowed > slack:
+                    out = d + (rise - allowed) * down
         return out
 
     @wp.func
@@ -161,9 +162,10 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
                 resting = -vn <= REST * wp.max(-wp.dot(g, n), ZERO) * dt
                 travelled = travelled + (ONE - travelled) * t
                 if wp.static(not lossy):  # elastic: a support touches at the frame's start
-                    gap = t * -dn
-                    scale = wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))
-                    resting = resting and gap <= GAP_ULPS * (scale + wp.length(d))
+                    if resting:
+                        gap = t * -dn
+                        scale = wp.max(wp.max(wp.abs(a[0]), wp.abs(a[1])), wp.abs(a[2]))
+                        resting = gap <= GAP_ULPS * (scale + wp.length(d))
                 if wp.static(features.events):
                     # the velocity at the contact's time on the chord's parabola (mean velocity
                     # w, acceleration g), u + g tau: 0 for a sphere at rest on its support

@@ -84,7 +84,8 @@ def path_struct(p: Precision):
         left: int
         """A box the path cannot meet, not tried (-1: none): the one a chord has just bounced
         off, its rest leaving the surface (the rounded box is convex, so a straight path from
-        its surface outward never enters it again)."""
+        its surface outward never enters it again). Only the chord's loops read it
+        (:func:`candidate_funcs` ``leaves``)."""
 
     return Path
 
@@ -197,7 +198,8 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
 
 
 @cache
-def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
+def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
+                    ) -> SimpleNamespace:
     """The nearest-hit loops over candidate boxes, for one path kind and one broad phase.
 
     Args:
@@ -211,6 +213,8 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
             ``"grid-bvh"`` the grid, the BVH as the fallback; ``"walk"`` the cells the path
             crosses, every box as the fallback (for a path :func:`walkable` refuses);
             ``"walk-bvh"`` the walk, the BVH as the fallback. Bit-identical whichever.
+        leaves: skip the box a path has left (``Path.left``): only for straight paths (a
+            chord cannot enter the convex box it leaves again; an arc can come back to it).
 
     Returns:
         Namespace with ``candidate``, ``nearest_brute``, ``nearest_cell``, ``nearest_bvh``,
@@ -239,8 +243,13 @@ def candidate_funcs(p: Precision, exact, broad_phase: str) -> SimpleNamespace:
     @wp.func(inline=True)
     def candidate(q: Path, boxes: Boxes, k: int, best: int, best_t: scalar, best_n: vec3):
         """Box ``k`` against the best so far: the reject, the exact sweep, and the closer of the
-        two contacts kept (ties: the lower box index); never the box the path has left."""
-        if k != q.left:
+        two contacts kept (ties: the lower box index); with ``leaves``, never the box the
+        path has left."""
+        other = int(1)
+        if wp.static(leaves):
+            if k == q.left:
+                other = 0
+        if other == 1:
             center = boxes.center[k]
             if apart(q, center, boxes.extent[k]) == 0:
                 hit, t, normal = exact(q, center, boxes.rotation[k], boxes.half_extents[k],

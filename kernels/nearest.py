@@ -130,7 +130,7 @@ def model_nearest_hit(p: Precision, broad_phase: str):
     Boxes, BroadPhase, _, _ = model_structs(p)
     funcs = nearest_funcs(p)
     chord_path = funcs.chord_path
-    nearest = candidate_funcs(p, funcs.sweep_chord, broad_phase).nearest
+    nearest = candidate_funcs(p, funcs.sweep_chord, broad_phase, leaves=True).nearest
 
     @wp.func(inline=True)
     def nearest_hit(a: vec3, d: vec3, r: scalar, left: int, boxes: Boxes, broad: BroadPhase):
