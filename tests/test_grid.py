@@ -13,6 +13,7 @@ import warp as wp
 from helpers import shaped_half_extents
 
 import warpsim as ws
+from benchmarks.common import room_swarm
 from warpsim import broad_phase as broad
 from warpsim.device import bvh_bounds
 
@@ -155,8 +156,10 @@ def test_paths_with_midpoints_on_cell_borders(device, precision, motion):
     d = rng.normal(size=(n, 3))
     vel = d / np.linalg.norm(d, axis=1)[:, None] * rng.uniform(0.5, 30.0, (n, 1))
     rad = rng.uniform(0.0, 0.05, n)
-    grid = broad.build_grid(boxes, broad.paths(np.zeros((n, 3)), vel, rad, g, DT).margin,
-                            dtype)
+    # the grid ``ws.bounce`` builds (its margin does not depend on the positions)
+    name, grid = broad.choose("grid", boxes, broad.paths(np.zeros((n, 3)), vel, rad, g, DT),
+                              dtype)
+    assert name.startswith("grid")
     cells = rng.integers(0, grid.dims, (n, 3))
     mid = grid.lower + cells * grid.cell
     on = rng.random((n, 3)) < 0.7  # the other axes anywhere in the cell
@@ -268,3 +271,44 @@ def test_a_path_fits_the_cell_of_its_midpoint(precision):
     surely = inside & (reach <= grid.kernel_margin * (1 - 1e-4))
     assert surely.sum() > n // 4 and (~surely).sum() > n // 10
     assert np.all(fits[surely]), np.flatnonzero(surely & ~fits)[:5]
+
+
+def test_a_sparse_scene_gets_a_table_that_stays_in_cache(device):
+    """A walled 40 m room holding only its walls, slow spheres: the finest grid its margin
+    allows has millions of empty cells (a lookup that misses the cache every frame); the grid
+    the simulator builds keeps its table within ``CACHE_CELLS`` cells, its lists as empty, and
+    the bits of every box. A scene whose finest table already fits keeps it."""
+    room = ws.Scene.load("room")
+    walls = room.boxes[:6]
+    scale = np.array([4.0, 4.0, 4.0])
+    thin = walls.half_extents.argmin(axis=1)
+    half = walls.half_extents * scale
+    half[np.arange(6), thin] = 0.05
+    center = walls.center * scale
+    center[np.arange(6), thin] -= np.sign(center[np.arange(6), thin]) * 0.15
+    big = ws.Scene(ws.RoundedBoxes(center, half), gravity=room.gravity)
+    rng = np.random.default_rng(2)
+    n = 3000
+    pos = rng.uniform([-18, 1, -18], [18, 22, 18], (n, 3))
+    d = rng.normal(size=(n, 3))
+    swarm = ws.Swarm(pos, 5.0 * d / np.linalg.norm(d, axis=1)[:, None], radius=0.05)
+    frame = broad.paths(swarm.position, swarm.velocity, swarm.radius, big.gravity, big.dt,
+                        big.boxes)
+    assert broad.build_grid(big.boxes, frame.margin).cells > 50 * broad.CACHE_CELLS
+    sims = {bp: ws.Simulator(big, swarm, broad_phase=bp, device=device)
+            for bp in ("brute", "grid")}
+    assert sims["grid"].broad_phase == "grid"
+    assert sims["grid"]._grid.cells <= broad.CACHE_CELLS
+    for sim in sims.values():
+        sim.step(120)
+    a, b = sims["brute"].state(), sims["grid"].state()
+    for f in ("position", "velocity", "energy"):
+        assert np.array_equal(getattr(a, f), getattr(b, f)), f
+    assert sims["brute"].stats.bounces == sims["grid"].stats.bounces > 0
+    # the standard room at 60 m/s: its finest table already fits
+    fast = room_swarm(room, 2000, 60.0)
+    frame = broad.paths(fast.position, fast.velocity, fast.radius, room.gravity, room.dt,
+                        room.boxes)
+    finest = broad.build_grid(room.boxes, frame.margin)
+    assert finest.cells <= broad.CACHE_CELLS
+    assert broad.choose("grid", room.boxes, frame)[1].cells == finest.cells

@@ -53,6 +53,17 @@ COST_SAMPLE = 4096
 #: Most cells a grid may have (its cell table is 4 bytes a cell).
 MAX_CELLS = 1 << 21
 
+#: Cells of a margin grid whose table (4 bytes a cell) stays in a core's cache: a finer grid
+#: pays ``TABLE_PENALTY`` per doubling of its table beyond it, per query, in the cost model (a
+#: lookup that misses the cache, the further the larger the table), so ``auto`` and ``"grid"``
+#: take the grid of larger cells this many fit unless its lists cost more than that (measured
+#: on the CPU: the grown rooms of 262 and 4096 boxes at 5 m/s ran 1.8 to 2 times faster with
+#: 20 000 to 27 000 cells than with 0.7 to 2 million, 16 384 boxes 1.15 times at 5 m/s and
+#: 1.7 times at 60 m/s, the standard room 3 to 12 % faster with 31 000 than 117 000;
+#: BENCHMARKS.md "Fast spheres").
+CACHE_CELLS = 1 << 15
+TABLE_PENALTY = 2.0
+
 #: Most (cell, box) entries a grid may hold; beyond it the grid is not built.
 MAX_ENTRIES = 1 << 24
 
@@ -193,7 +204,8 @@ def floor_point(boxes: RoundedBoxes, gravity) -> np.ndarray | None:
     return np.where(g > 0.0, hi, lo)
 
 
-def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32) -> Grid | None:
+def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32,
+               max_cells: int = MAX_CELLS) -> Grid | None:
     """The grid over ``boxes`` for paths that reach ``margin`` beyond their cell.
 
     Args:
@@ -201,6 +213,8 @@ def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32) -> Grid | N
         margin: [m], > 0.
         dtype: the kernels' float type: the cell geometry is rounded to it first, so that the
             lists are made for exactly the cells the kernel computes.
+        max_cells: the most cells (the cells, at least ``margin`` wide, grow by 1.25 until
+            they fit).
 
     Returns:
         The :class:`Grid`, or None when the scene has no boxes or the grid would exceed
@@ -217,7 +231,7 @@ def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32) -> Grid | N
     span = scene_hi - scene_lo
     cell = np.maximum(np.full(3, margin), span / MAX_CELLS_PER_AXIS)
     dims = np.maximum(1, np.ceil(span / cell)).astype(np.int64)
-    while np.prod(dims) > MAX_CELLS:
+    while np.prod(dims) > min(max_cells, MAX_CELLS):
         cell *= 1.25
         dims = np.maximum(1, np.ceil(span / cell)).astype(np.int64)
     # the geometry as the kernel holds it
@@ -458,6 +472,27 @@ def grid_cost(grid: Grid, frame: Paths, fallback_cost: float) -> float:
     return GRID_FIXED + float(np.mean(np.where(fits, lengths, fallback_cost)))
 
 
+def margin_grid(boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
+                ) -> tuple[float, Grid] | None:
+    """The margin grid for ``frame`` and its cost by the model (:func:`grid_cost`, plus
+    ``TABLE_PENALTY`` per doubling of a table beyond ``CACHE_CELLS``): the finest grid the
+    margin allows, or the one of ``CACHE_CELLS`` cells at most when that costs less; None when
+    none can be built."""
+    fallback_cost = exhaustive(len(boxes))[1]
+    best = None
+    for max_cells in (MAX_CELLS, CACHE_CELLS):
+        grid = build_grid(boxes, frame.margin, dtype, max_cells)
+        if grid is None:
+            continue
+        cost = grid_cost(grid, frame, fallback_cost)
+        cost += TABLE_PENALTY * max(math.log2(grid.cells / CACHE_CELLS), 0.0)
+        if best is None or cost < best[0]:
+            best = (cost, grid)
+        if grid.cells <= CACHE_CELLS:
+            break
+    return best
+
+
 def estimates(boxes: RoundedBoxes, frame: Paths, dtype=np.float32) -> dict:
     """Every broad phase the scene can run, with its cost by the model and its grid.
 
@@ -472,9 +507,9 @@ def estimates(boxes: RoundedBoxes, frame: Paths, dtype=np.float32) -> dict:
     if not k:
         return out
     suffix = "-bvh" if fallback == "bvh" else ""
-    grid = build_grid(boxes, frame.margin, dtype)
+    grid = margin_grid(boxes, frame, dtype)
     if grid is not None:
-        out["grid" + suffix] = (grid_cost(grid, frame, fallback_cost), grid)
+        out["grid" + suffix] = grid
     walk = build_walk_grid(boxes, frame.reach, frame.mean_path, dtype)
     if walk is not None:
         out["walk" + suffix] = (walk.cost, walk)
@@ -519,8 +554,11 @@ def choose(requested: str, boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
     if choice in ("grid", "walk"):
         grid = None
         if k:
-            grid = (build_grid(boxes, frame.margin, dtype) if choice == "grid" else
-                    build_walk_grid(boxes, frame.reach, frame.mean_path, dtype))
+            if choice == "grid":
+                grid = margin_grid(boxes, frame, dtype)
+                grid = None if grid is None else grid[1]
+            else:
+                grid = build_walk_grid(boxes, frame.reach, frame.mean_path, dtype)
         if grid is None:
             return exhaustive(k)[0], None
         name = choice + ("-bvh" if exhaustive(k)[0] == "bvh" else "")
