@@ -61,6 +61,21 @@ def test_bounce_grid_is_bit_identical(device, k, offset, precision):
     assert brute.bounces.sum() > 0
 
 
+def grid_matches_brute(scene, swarm, frames, device):
+    """Run ``frames`` frames with every box and with the grid: the same bits and contacts.
+    Returns the grid's simulator."""
+    sims = {bp: ws.Simulator(scene, swarm, broad_phase=bp, device=device)
+            for bp in ("brute", "grid")}
+    assert sims["grid"].broad_phase == "grid"
+    for sim in sims.values():
+        sim.step(frames)
+    a, b = sims["brute"].state(), sims["grid"].state()
+    for f in ("position", "velocity", "energy"):
+        assert np.array_equal(getattr(a, f), getattr(b, f)), f
+    assert sims["brute"].stats.bounces == sims["grid"].stats.bounces > 0
+    return sims["grid"]
+
+
 def test_spheres_on_cell_borders_and_resting(device):
     """Centres put exactly on cell borders (in the kernels' float32), and spheres resting on
     a floor and on box tops: the grid keeps every contact brute force finds."""
@@ -82,15 +97,7 @@ def test_spheres_on_cell_borders_and_resting(device):
     vel[: n // 3] = 0.0
     keep = floor.signed_distance(pos).min(axis=1) >= r
     swarm = ws.Swarm(pos[keep], vel[keep], radius=r)
-    sims = {bp: ws.Simulator(scene, swarm, broad_phase=bp, device=device) for bp in
-            ("brute", "grid")}
-    assert sims["grid"].broad_phase == "grid"
-    for sim in sims.values():
-        sim.step(90)
-    a, b = sims["brute"].state(), sims["grid"].state()
-    for f in ("position", "velocity", "energy"):
-        assert np.array_equal(getattr(a, f), getattr(b, f)), f
-    assert sims["brute"].stats.bounces == sims["grid"].stats.bounces > 0
+    grid_matches_brute(scene, swarm, 90, device)
 
 
 @pytest.mark.slow
@@ -295,16 +302,8 @@ def test_a_sparse_scene_gets_a_table_that_stays_in_cache(device):
     frame = broad.paths(swarm.position, swarm.velocity, swarm.radius, big.gravity, big.dt,
                         big.boxes)
     assert broad.build_grid(big.boxes, frame.margin).cells > 50 * broad.CACHE_CELLS
-    sims = {bp: ws.Simulator(big, swarm, broad_phase=bp, device=device)
-            for bp in ("brute", "grid")}
-    assert sims["grid"].broad_phase == "grid"
-    assert sims["grid"]._grid.cells <= broad.CACHE_CELLS
-    for sim in sims.values():
-        sim.step(120)
-    a, b = sims["brute"].state(), sims["grid"].state()
-    for f in ("position", "velocity", "energy"):
-        assert np.array_equal(getattr(a, f), getattr(b, f)), f
-    assert sims["brute"].stats.bounces == sims["grid"].stats.bounces > 0
+    grid = grid_matches_brute(big, swarm, 120, device)
+    assert grid._grid.cells <= broad.CACHE_CELLS
     # the standard room at 60 m/s: its finest table already fits
     fast = room_swarm(room, 2000, 60.0)
     frame = broad.paths(fast.position, fast.velocity, fast.radius, room.gravity, room.dt,
