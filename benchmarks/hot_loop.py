@@ -16,9 +16,11 @@ launching thread (``time.thread_time``: with ``workers=1`` the CPU launch runs i
 time a shared machine's other work holds the core is not counted; contention for caches still
 is, hence the best of many turns. The table gives the best ns per
 sphere-frame of each side, their ratio, and whether the final states are bit-identical (a
-SHA-256 of the state's bytes). With ``--speeds``, each case runs once per speed, the swarm drawn
-from the scene's emitter with its speed replaced (every direction), and each side's cost at the
-last speed against the first is printed (issue 20: 60 m/s against 5 m/s over a whole run).
+SHA-256 of the state's bytes). ``--scene grown-K`` advances ``benchmarks.speed``'s grown room
+of ``K`` boxes (the generator of this checkout, for both sides). With ``--speeds``, each case
+runs once per speed, the swarm drawn from the scene's emitter with its speed replaced (every
+direction), and each side's cost at the last speed against the first is printed (issue 20: 60
+m/s against 5 m/s over a whole run).
 """
 
 from __future__ import annotations
@@ -48,7 +50,13 @@ import warp as wp
 wp.config.quiet = True
 import warpsim as ws
 prec, motion, n, frames, timings = sys.argv[1], sys.argv[2], *map(int, sys.argv[3:6])
-scene = ws.Scene.load(sys.argv[6])
+if sys.argv[6].startswith("grown-"):  # benchmarks.speed's grown room of K boxes
+    sys.path.insert(0, sys.argv[8])
+    from benchmarks.speed import SEED, grown_room
+    k = int(sys.argv[6].removeprefix("grown-"))
+    scene = grown_room(k, n, np.random.default_rng([SEED, k]))
+else:
+    scene = ws.Scene.load(sys.argv[6])
 if sys.argv[7]:  # the emitter's speed replaced (every direction, as the standard room's)
     emitter = dataclasses.replace(scene.emitter, count=n, speed=float(sys.argv[7]))
     swarm = emitter.spawn(scene.boxes, seed=20240601)
@@ -94,7 +102,8 @@ def measure(site: Path | None, prec: str, motion: str, n: int, frames: int,
     if site is not None:
         env["PYTHONPATH"] = str(site)
     out = subprocess.run([sys.executable, "-c", CHILD, prec, motion, str(n), str(frames),
-                          str(timings), scene, "" if speed is None else repr(float(speed))],
+                          str(timings), scene, "" if speed is None else repr(float(speed)),
+                          str(Path(__file__).resolve().parent.parent)],
                          check=True, capture_output=True, text=True,
                          env=env, cwd=tempfile.gettempdir())
     result = json.loads(out.stdout.strip().splitlines()[-1])
@@ -108,7 +117,8 @@ def main(argv=None) -> None:
     p.add_argument("--against", default="main", help="git revision to compare with (main)")
     p.add_argument("--repeats", type=int, default=None, help="turns per side (default 5)")
     p.add_argument("--scene", default="room",
-                   help="bundled scene to advance (default room; plates is the ballistic one)")
+                   help="bundled scene to advance (default room; plates is the ballistic one), "
+                        "or grown-K: benchmarks.speed's grown room of K boxes")
     p.add_argument("--cases", default=None,
                    help="comma-separated PRECISION/MOTION pairs (default: all four)")
     p.add_argument("--speeds", default=None,
