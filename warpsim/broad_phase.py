@@ -12,6 +12,8 @@ the lower index, and each skips only boxes the path cannot hit before the first 
   radius is within the margin, so the margin follows half a frame's path: :func:`reach`); any
   other falls back to every box, or to the BVH (``"grid-bvh"``). Best when a frame's path is
   short against the scene: the standard room's spheres see one or two boxes instead of 22.
+  Its cells are at least the margin wide, larger where a table of ``CACHE_CELLS`` cells (one
+  that stays in cache) costs less than a finer one (:func:`margin_grid`).
 - ``"walk"``: a uniform grid whose cells list the boxes within the spheres' radius (plus the
   arc's sagitta) of the cell; a path reads the lists of the cells its chord crosses, in order
   (3D-DDA), tries each box once, and stops at the first cell beyond the nearest contact found.
