@@ -69,10 +69,11 @@ CURVED = 3
 @cache
 def ballistic_funcs(features: Features) -> SimpleNamespace:
     """Build the ballistic loop for one feature set (``precision``, ``spin``, ``lossy``,
-    ``broad_phase`` and ``events`` are read; see ``nearest_arc.model_nearest_hit_arc``). Events
-    are written as ``bounce.bounce_funcs`` writes them, the fraction being of the frame's time,
-    exact here; a support start (a face slide reaching an edge, a curved slide reaching a face)
-    is a row with ``resting`` 1 and normal speed 0.
+    ``broad_phase``, ``events`` and ``falls`` are read; see
+    ``nearest_arc.model_nearest_hit_arc``). Events are written as ``bounce.bounce_funcs``
+    writes them, the fraction being of the frame's time, exact here; a support start (a face
+    slide reaching an edge, a curved slide reaching a face) is a row with ``resting`` 1 and
+    normal speed 0.
 
     Returns:
         Namespace with ``ballistic_path``.
@@ -81,6 +82,8 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
     scalar, vec3 = p.scalar, p.vec3
     Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
     nearest_hit_arc = model_nearest_hit_arc(p, features.broad_phase)
+    # the free legs' query: under gravity (``falls``) the arc's only
+    nearest_free_leg = model_nearest_hit_arc(p, features.broad_phase, features.falls)
     arc_contact_centre = nearest_arc_funcs(p).arc_contact_centre
     arc_point = arc_funcs(p).arc_point
     separation_lift = nearest_funcs(p).separation_lift
@@ -587,7 +590,7 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         supported = int(0)
         done = int(0)
         while done == 0:
-            box, s, n = nearest_hit_arc(a, v, g, rest, r, boxes, broad)
+            box, s, n = nearest_free_leg(a, v, g, rest, r, boxes, broad)
             if box < 0:
                 a = arc_point(a, v, g, rest)
                 v = v + rest * g

@@ -69,6 +69,10 @@ class Features:
         free_horizon: a run of free frames tests the bounds once for the frames up to its next
             reset or record when it can prove them all clear (the same bits as a test every
             frame); False: every frame is tested. For tests and measurement.
+        falls: ballistic motion under gravity that is not zero: a frame's free legs query
+            along the arc only, without the chord's query that ``g = 0`` takes instead (the
+            same bits wherever ``g != 0``; a smaller hot loop). Always False for the linear
+            motion.
 
     ``motion`` and ``broad_phase`` may be any ``str`` (an enumeration of ``str`` included):
     they compare and hash as their text.
@@ -85,6 +89,7 @@ class Features:
     free_flight: bool = False
     free_reset_every: int = FREE_RESET_EVERY
     free_horizon: bool = True
+    falls: bool = False
 
     def __post_init__(self):
         for name, allowed in (("precision", PRECISIONS), ("motion", MOTIONS),
@@ -93,8 +98,10 @@ class Features:
             if not isinstance(value, str) or value not in allowed:
                 raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
         for name in ("spin", "lossy", "energy_correction", "events", "births", "free_flight",
-                     "free_horizon"):
+                     "free_horizon", "falls"):
             object.__setattr__(self, name, bool(getattr(self, name)))
+        if self.motion != "ballistic":  # one linear kernel, not two alike
+            object.__setattr__(self, "falls", False)
         every = self.free_reset_every
         if isinstance(every, bool) or int(every) != every or every < 1:
             raise ValueError(f"free_reset_every must be an integer >= 1, got {every!r}")

@@ -137,7 +137,7 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
 
 
 @cache
-def model_nearest_hit_arc(p: Precision, broad_phase: str):
+def model_nearest_hit_arc(p: Precision, broad_phase: str, falls: bool = False):
     """The arc's nearest-hit ``@wp.func`` the kernels call.
 
     Args:
@@ -145,6 +145,8 @@ def model_nearest_hit_arc(p: Precision, broad_phase: str):
         broad_phase: one of ``BROAD_PHASES``, compiled in: as for the chord, the grid's cell
             list when the arc's bounds stay in its cell's margin, else every box or the BVH
             query; bit-identical whichever.
+        falls: for a ``g`` known not to be zero: the arc's query only, without the chord's
+            (the same answer for every ``g != 0``, from less code).
 
     Returns:
         ``nearest_hit_arc(a, v, g, tau, r, boxes, broad) -> (box, s, normal)``: the first
@@ -167,7 +169,9 @@ def model_nearest_hit_arc(p: Precision, broad_phase: str):
         box = int(-1)
         s = tau
         normal = vec3(ZERO, ZERO, ZERO)
-        if g[0] == ZERO and g[1] == ZERO and g[2] == ZERO:  # the chord's own query
+        if wp.static(falls):
+            box, s, normal = nearest(arc_path(a, v, g, tau, r), boxes, broad)
+        elif g[0] == ZERO and g[1] == ZERO and g[2] == ZERO:  # the chord's own query
             box, t, normal = nearest_chord(a, v * tau, r, -1, boxes, broad)
             if box >= 0:
                 s = t * tau

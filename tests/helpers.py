@@ -77,11 +77,11 @@ FLAGS = (False, True)
 def every_kernel_variant() -> list[tuple[str, object]]:
     """``(label, kernel)`` for every kernel every factory can return: the collide kernel per
     precision x motion x broad phase, the bounce kernel also over ``spin`` x ``lossy``, the
-    frame kernel also over ``energy_correction`` x ``events``, and once with births (spin and
-    events on). Making a kernel object compiles nothing (that happens at its first launch),
-    so the whole product is cheap to enumerate. The labels read
-    ``factory/precision/motion/broad phase[/spin/lossy[/correction/events]]`` (``.../births``
-    for the births variant).
+    frame kernel also over ``energy_correction`` x ``events``, once with births (spin and
+    events on) and, ballistic, once under gravity (``falls``). Making a kernel object compiles
+    nothing (that happens at its first launch), so the whole product is cheap to enumerate.
+    The labels read ``factory/precision/motion/broad phase[/spin/lossy[/correction/events]]``
+    (``.../births`` and ``.../falls`` for those variants).
     """
     from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
     from warpsim.kernels.data import BROAD_PHASES, MOTIONS, PRECISIONS, Features
@@ -100,6 +100,8 @@ def every_kernel_variant() -> list[tuple[str, object]]:
                                                events=events))))
         out.append((f"frame/{p}/{m}/{b}/births",
                     frame_kernel(f.but(spin=True, events=True, births=True))))
+        if m == "ballistic":
+            out.append((f"frame/{p}/{m}/{b}/falls", frame_kernel(f.but(falls=True))))
     return out
 
 

@@ -385,3 +385,29 @@ def test_far_from_origin():
     rest = np.array([[0.25, -L, -0.5]]) + shift
     out = run(closed_room(HALF, center=shift), rest, np.zeros((1, 3)), 60, 1 / 60, "float64")
     np.testing.assert_array_equal(out["position"], rest)
+
+
+@pytest.mark.parametrize("name", ["plates", "room"])
+@pytest.mark.parametrize("prec", ["float32", "float64"])
+def test_the_falling_kernel_keeps_the_bits(name, prec):
+    """Under gravity the frame's free legs query along the arc only (``Features.falls``): the
+    same bits as the kernel that chooses between the chord's and the arc's query at every leg,
+    over 90 frames of bundled scenes (bounces, supports and slides included); a scene without
+    gravity keeps the choice."""
+    from warpsim.kernels.frame_kernel import frame_kernel
+
+    scene = ws.Scene.load(name)
+    swarm = scene.spawn(n=300, seed=8)
+    sims = [ws.Simulator(scene, swarm, precision=prec, motion="ballistic", device="cpu")
+            for _ in range(2)]
+    assert sims[0]._features.falls
+    sims[1]._kernel = frame_kernel(sims[1]._features.but(falls=False))
+    for sim in sims:
+        sim.step(90)
+    a, b = sims[0].state(), sims[1].state()
+    for f in ("position", "velocity", "energy"):
+        assert np.array_equal(getattr(a, f), getattr(b, f)), f
+    assert sims[0].stats.bounces == sims[1].stats.bounces > 0
+    floating = ws.Scene.load("thin-walls")
+    sim = ws.Simulator(floating, floating.spawn(n=10, seed=1), motion="ballistic", device="cpu")
+    assert not sim._features.falls

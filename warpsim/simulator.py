@@ -214,7 +214,8 @@ class Simulator:
                                   births=swarm.has_births,
                                   free_flight=(_starts_in_free_flight(scene.boxes, swarm)
                                                if free_flight is None
-                                               else check.flag("free_flight", free_flight)))
+                                               else check.flag("free_flight", free_flight)),
+                                  falls=bool(np.any(np.asarray(scene.gravity) != 0.0)))
         self._kernel = frame_kernel(self._features)
         self._upload(swarm)
         self._shards = _shards(self._n, self.workers)
