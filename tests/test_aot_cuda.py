@@ -26,8 +26,10 @@ from warpsim.kernels.data import BROAD_PHASES, MOTIONS, PRECISIONS, Features
 from warpsim.kernels.frame_kernel import frame_kernel
 
 ARCHS = (80, 90)
-ALL_ON = dict(spin=True, lossy=True, energy_correction=True, events=True, births=True)
-ALL_OFF = dict(spin=False, lossy=False, energy_correction=False, events=False, births=False)
+ALL_ON = dict(spin=True, lossy=True, energy_correction=True, events=True, births=True,
+              falls=True)
+ALL_OFF = dict(spin=False, lossy=False, energy_correction=False, events=False, births=False,
+               falls=False)
 
 
 def sample():
