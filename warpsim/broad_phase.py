@@ -36,6 +36,7 @@ import numpy as np
 
 from . import validation as check
 from .device import BVH_MIN_BOXES, bvh_bounds
+from .energy import lowest_potential
 from .kernels.candidates import BOUNDS_PAD_ABS, BOUNDS_PAD_REL, REJECT_SLACK, WALK_PAD_ULPS
 from .kernels.data import WALK_FLAG_BITS
 from .obstacles import RoundedBoxes
@@ -133,13 +134,14 @@ class CellLists:
         """Boxes listed per cell, averaged over the cells."""
         return float(len(self.cell_boxes)) / max(self.cells, 1)
 
-    def list_lengths(self, points: np.ndarray) -> np.ndarray:
-        """Boxes listed in the cell holding each point [m], (S, 3) -> (S,); 0 outside."""
+    def list_lengths(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For each point [m], (S, 3): whether it lies in the grid, and the boxes listed in the
+        cell holding it (0 outside), (S,) each."""
         c = np.floor((np.asarray(points) - self.lower) / self.cell).astype(np.int64)
         inside = np.all((c >= 0) & (c < self.dims), axis=1)
         c = np.where(inside[:, None], c, 0)
         cell = c[:, 0] + self.dims[0] * (c[:, 1] + self.dims[1] * c[:, 2])
-        return np.where(inside, self.cell_start[cell + 1] - self.cell_start[cell], 0)
+        return inside, np.where(inside, self.cell_start[cell + 1] - self.cell_start[cell], 0)
 
 
 @dataclass
@@ -171,39 +173,28 @@ class Grid(CellLists):
 
 
 def reach(position: np.ndarray, velocity: np.ndarray, radius: np.ndarray, gravity, dt: float,
-          floor: np.ndarray | None = None) -> float:
+          lowest: float | None = None) -> float:
     """The margin grid's margin [m]: how far beyond the cell of its midpoint a typical sphere's
     frame path reaches.
 
     A path's query box (its chord's bounding box grown by the radius) lies within ``|d_i| / 2 +
     r`` of its midpoint along each axis, so it fits the cell of its midpoint grown by that
     much. The chord is at most ``(|v| + |g| dt) dt`` long, with ``|v|`` the highest speed the
-    sphere can reach: energy bounds it by ``sqrt(|v0|^2 + 2 |g| h)``, ``h`` [m] the sphere's
-    height above ``floor`` (the lowest point of the boxes' bounds along gravity; none: the
-    start speed), which is what a slow sphere falling to the floor gains. The margin is that
-    half path plus the radius at the ``REACH_QUANTILE`` of the swarm, times ``REACH_FACTOR``."""
+    sphere can reach: energy bounds its square by ``|v0|^2 + 2 (-g . x0 - lowest)``, with
+    ``lowest`` [J/kg] the lowest potential per unit mass of the scene's region
+    (``energy.lowest_potential``, origin 0; None: the start speed), which is what a slow sphere
+    falling to the floor gains. The margin is that half path plus the radius at the
+    ``REACH_QUANTILE`` of the swarm, times ``REACH_FACTOR``."""
     if len(position) == 0:
         return 0.0
     g = np.asarray(gravity, dtype=np.float64)
     g_len = float(np.linalg.norm(g))
     speed2 = np.einsum("ij,ij->i", velocity, velocity).astype(np.float64)
-    if floor is not None and g_len > 0.0:
-        drop = np.maximum((np.asarray(position, dtype=np.float64) - floor) @ (g / -g_len), 0.0)
-        speed2 = speed2 + 2.0 * g_len * drop
+    if lowest is not None:
+        fall = -(np.asarray(position, dtype=np.float64) @ g) - lowest
+        speed2 = speed2 + 2.0 * np.maximum(fall, 0.0)
     half_path = 0.5 * (np.sqrt(speed2) + g_len * dt) * dt
     return REACH_FACTOR * float(np.quantile(half_path + radius, REACH_QUANTILE))
-
-
-def floor_point(boxes: RoundedBoxes, gravity) -> np.ndarray | None:
-    """The corner of the boxes' overall reject bounds lowest along ``gravity`` [m], (3,): no
-    sphere among them falls below it (None without boxes or gravity)."""
-    g = np.asarray(gravity, dtype=np.float64)
-    if len(boxes) == 0 or not np.any(g):
-        return None
-    extent = boxes.world_extent()
-    lo = (boxes.center - extent).min(axis=0)
-    hi = (boxes.center + extent).max(axis=0)
-    return np.where(g > 0.0, hi, lo)
 
 
 def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32,
@@ -312,17 +303,17 @@ def paths(position: np.ndarray, velocity: np.ndarray, radius: np.ndarray, gravit
           boxes: RoundedBoxes | None = None) -> Paths:
     """The :class:`Paths` of a swarm's frames (``position`` (N, 3) [m], ``velocity`` (N, 3)
     [m/s], ``radius`` (N,) [m], ``gravity`` [m/s^2], ``dt`` [s]); with ``boxes``, the grid's
-    margin allows for the speed a sphere gains falling to their lowest point (:func:`reach`;
-    without, a single query's first frame)."""
+    margin allows for the speed a sphere gains falling to the lowest point of the boxes and the
+    starts (:func:`reach`; without, a single query's first frame)."""
     g = np.asarray(gravity, dtype=np.float64)
     if len(position) == 0:
         return Paths(margin=0.0, reach=0.0, mean_path=np.zeros(3))
     sagitta = float(np.max(np.abs(g))) * dt * dt / 8.0
     step = np.abs(velocity) * dt + np.abs(g) * dt * dt
-    floor = None if boxes is None else floor_point(boxes, g)
+    lowest = None if boxes is None else lowest_potential(g, boxes, position)
     some = np.linspace(0, len(position) - 1, min(len(position), COST_SAMPLE)).astype(np.int64)
     chord = (velocity[some] + g * (dt / 2)) * dt
-    return Paths(margin=reach(position, velocity, radius, g, dt, floor),
+    return Paths(margin=reach(position, velocity, radius, g, dt, lowest),
                  reach=(float(np.max(radius)) + sagitta) * (1.0 + WALK_REACH_HEADROOM),
                  mean_path=step.mean(axis=0), midpoint=position[some] + chord / 2,
                  half_extent=np.abs(chord) / 2 + np.asarray(radius)[some, None])
@@ -467,10 +458,9 @@ def grid_cost(grid: Grid, frame: Paths, fallback_cost: float) -> float:
     the sample of first frames in ``frame`` (without one: the mean list over the cells)."""
     if frame.midpoint is None or not len(frame.midpoint):
         return GRID_FIXED + grid.mean_list_length()
-    lengths = grid.list_lengths(frame.midpoint)
-    c = np.floor((frame.midpoint - grid.lower) / grid.cell)
-    fits = (np.all((c >= 0) & (c < grid.dims), axis=1)
-            & np.all(frame.half_extent * (1.0 + REJECT_SLACK) <= grid.kernel_margin, axis=1))
+    inside, lengths = grid.list_lengths(frame.midpoint)
+    fits = inside & np.all(frame.half_extent * (1.0 + REJECT_SLACK) <= grid.kernel_margin,
+                           axis=1)
     return GRID_FIXED + float(np.mean(np.where(fits, lengths, fallback_cost)))
 
 
