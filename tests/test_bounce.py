@@ -521,3 +521,36 @@ def test_low_hops_on_a_ramp_never_end_inside(tilt, turn, rounding, height, side_
                      < 1.5, axis=1)
     gap = ramp.signed_distance(path)[:, 0] - r
     assert np.all(gap[on_ramp] >= -tol), gap.min()
+
+
+@pytest.mark.parametrize("motion", ["linear", "ballistic"])
+@pytest.mark.parametrize("broad_phase", ["brute", "grid"])
+def test_a_point_on_a_sharp_plate_moving_in_bounces_whatever_the_rounding(
+        precision, motion, broad_phase):
+    """Points (``r = 0``) that start on a sharp, zero-thickness plate (``rb = 0``, no extent
+    along its normal) far from the origin and move into it: the plate's bounds and the path's
+    touch only at the path's start, with nothing growing either along the normal, so the
+    reject has no slack there but its rounding pad; each must bounce at ``t = 0`` and end on
+    the side it came from, for plates normal to each axis. (Without the pad on the chord's
+    midpoint about half of them went through in both precisions.)"""
+    rng = np.random.default_rng(7)
+    n = 1500
+    for axis in range(3):
+        at = float(np.float32(rng.uniform(100.0, 1000.0)))
+        center = np.zeros(3)
+        center[axis] = at
+        half = np.full(3, 1.0e4)
+        half[axis] = 0.0
+        boxes = ws.RoundedBoxes(center=[center], half_extents=[half], radius=0.0)
+        scene = ws.Scene(boxes, gravity=(0.0, 0.0, 0.0), dt=1.0 / 60.0)
+        x = rng.uniform(-100.0, 100.0, (n, 3))
+        x[:, axis] = at
+        v = rng.normal(size=(n, 3)) * 3.0
+        v[:, axis] = -np.abs(v[:, axis]) - 0.01
+        sim = ws.Simulator(scene, ws.Swarm(x, v, radius=0.0), precision=precision,
+                           motion=motion, broad_phase=broad_phase, device="cpu")
+        sim.step(1)
+        state = sim.state()
+        assert np.all(state.position[:, axis] >= at), (axis, np.flatnonzero(
+            state.position[:, axis] < at)[:5])
+        assert np.all(state.velocity[:, axis] > 0.0), axis

@@ -311,3 +311,68 @@ def test_a_sparse_scene_gets_a_table_that_stays_in_cache(device):
     finest = broad.build_grid(room.boxes, frame.margin)
     assert finest.cells <= broad.CACHE_CELLS
     assert broad.choose("grid", room.boxes, frame)[1].cells == finest.cells
+
+
+@cache
+def reject_kernel(name: str):
+    from warpsim.kernels.candidates import bounds_funcs, path_funcs
+    from warpsim.kernels.precision import precision as types_of
+    from warpsim.kernels.variant import variant_kernel
+
+    p = types_of(name)
+    funcs = bounds_funcs(p)
+    per_axis, branch_free = funcs.apart_per_axis, funcs.apart_branch_free
+    make_path = path_funcs(p)
+
+    @variant_kernel
+    def run(a: wp.array[p.vec3], d: wp.array[p.vec3], grow: wp.array[p.vec3],
+            center: wp.array[p.vec3], extent: wp.array[p.vec3], out: wp.array2d[wp.int32]):
+        i = wp.tid()
+        q = make_path(a[i], d[i], p.vec3(), p.scalar(1.0), p.scalar(0.0), d[i], grow[i])
+        out[i, 0] = per_axis(q, center[i], extent[i])
+        out[i, 1] = branch_free(q, center[i], extent[i])
+
+    return run
+
+
+def test_the_reject_without_branches_keeps_every_verdict(precision):
+    """The branch-free reject (one comparison of ``max_i (|rel_i| - lim_i)``) against the test
+    per axis, and both against the float64 bounds: random paths and boxes at every scale (far
+    from the origin, zero extents and zero motion on an axis), and boxes placed exactly on,
+    just inside and just beyond the reject's bound along one axis. The two forms agree on
+    every case, and neither rejects a box whose bounds the path's bounds meet in float64."""
+    from warpsim.kernels.candidates import REJECT_SLACK
+    from warpsim.kernels.precision import precision as types_of
+
+    p = types_of(precision)
+    rng = np.random.default_rng(11)
+    n = 30_000
+    scale = 10.0 ** rng.integers(-3, 6, (n, 1))
+    a = rng.normal(size=(n, 3)) * scale
+    d = rng.normal(size=(n, 3)) * scale * rng.choice([0.0, 0.01, 1.0], (n, 3))
+    grow = rng.uniform(0, 1, (n, 3)) * scale * rng.choice([0.0, 1.0], (n, 1))
+    extent = rng.uniform(0, 1, (n, 3)) * scale * rng.choice([0.0, 1.0], (n, 3))
+    mid = a + 0.5 * d
+    lim = (extent + grow) * (1.0 + REJECT_SLACK) + 0.5 * np.abs(d)
+    center = mid + rng.uniform(-1.4, 1.4, (n, 3)) * lim
+    # on the bound along one axis: exactly, a few ulps either side
+    edge = rng.random(n) < 0.5
+    axis = rng.integers(0, 3, n)
+    rows = np.flatnonzero(edge)
+    sign = rng.choice([-1.0, 1.0], rows.size)
+    ulps = rng.choice([-4, -1, 0, 0, 1, 4], rows.size)
+    eps = np.finfo(p.np_dtype).eps
+    center[rows, axis[rows]] = (mid[rows, axis[rows]] + sign * lim[rows, axis[rows]]
+                                * (1.0 + ulps * eps))
+    arrays = [wp.array(x.astype(p.np_dtype), dtype=p.vec3, device="cpu")
+              for x in (a, d, grow, center, extent)]
+    out = wp.zeros((n, 2), dtype=wp.int32, device="cpu")
+    wp.launch(reject_kernel(precision), dim=n, inputs=[*arrays, out], device="cpu")
+    out = out.numpy()
+    assert np.array_equal(out[:, 0], out[:, 1]), np.flatnonzero(out[:, 0] != out[:, 1])[:5]
+    # float64 on the values the kernel read: bounds that meet are never rejected
+    a, d, grow, center, extent = (x.numpy().astype(np.float64) for x in arrays)
+    gap = np.abs(a + 0.5 * d - center) - (extent + grow) - 0.5 * np.abs(d)
+    meets = np.all(gap <= 0.0, axis=1)
+    assert meets.sum() > n // 20 and (~meets).sum() > n // 4
+    assert not out[meets, 1].any(), np.flatnonzero(meets & (out[:, 1] == 1))[:5]
