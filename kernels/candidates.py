@@ -102,6 +102,7 @@ def path_funcs(p: Precision):
     Path = path_struct(p)
     HALF = scalar(0.5)
     PAD_REL = scalar(BOUNDS_PAD_REL)
+    HALF_PADDED = scalar(0.5 * (1.0 + BOUNDS_PAD_REL))  # |d| / 2 and its pad, one product
 
     @wp.func(inline=True)
     def make_path(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, d: vec3, grow: vec3):
@@ -112,9 +113,8 @@ def path_funcs(p: Precision):
         q.tau = tau
         q.r = r
         q.mid = a + HALF * d
-        half_d = vec3(HALF * wp.abs(d[0]), HALF * wp.abs(d[1]), HALF * wp.abs(d[2]))
-        pad = vec3(wp.abs(q.mid[0]), wp.abs(q.mid[1]), wp.abs(q.mid[2])) + half_d
-        q.reach = half_d + PAD_REL * pad
+        q.reach = (HALF_PADDED * vec3(wp.abs(d[0]), wp.abs(d[1]), wp.abs(d[2]))
+                   + PAD_REL * vec3(wp.abs(q.mid[0]), wp.abs(q.mid[1]), wp.abs(q.mid[2])))
         q.grow = grow
         q.end = a + d
         q.left = -1
