@@ -15,6 +15,7 @@ import json
 import os
 import select
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -61,7 +62,8 @@ class Browser:
     """One headless Chromium with one page; use as a context manager (killed on exit)."""
 
     def __init__(self, executable: str, size=(1280, 800)):
-        self._folder = tempfile.TemporaryDirectory(prefix="warpsim-chromium-")
+        self._folder = tempfile.TemporaryDirectory(prefix="warpsim-chromium-",
+                                                   ignore_cleanup_errors=True)
         to_child_r, self._to_child = os.pipe()
         self._from_child, from_child_w = os.pipe()
         # the child's ends above 4, so that moving them to 3 and 4 never overwrites one
@@ -73,7 +75,8 @@ class Browser:
             self.process = subprocess.Popen([sys.executable, "-c", TRAMPOLINE, str(to_child_r),
                                              str(from_child_w), *args],
                                             pass_fds=(to_child_r, from_child_w),
-                                            stdin=subprocess.DEVNULL, stdout=log, stderr=log)
+                                            stdin=subprocess.DEVNULL, stdout=log, stderr=log,
+                                            start_new_session=True)
         os.close(to_child_r)
         os.close(from_child_w)
         self._buffer = b""
@@ -197,9 +200,22 @@ class Browser:
         return path
 
     def close(self) -> None:
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.wait()
+        """Kill Chromium and every process it started (its own session: the renderers and
+        helpers outlive a kill of the browser alone and go on writing into the profile), wait
+        for them to go, then remove the profile."""
+        group = self.process.pid
+        try:
+            os.killpg(group, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        self.process.wait()
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline:
+            try:
+                os.killpg(group, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.05)
         for fd in (self._to_child, self._from_child):
             try:
                 os.close(fd)
