@@ -141,7 +141,10 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
 
     @wp.func(inline=True)
     def apart_per_axis(q: Path, center: vec3, extent: vec3):
-        """:func:`apart`, a test per axis."""
+        """The reject, a test per axis: 1 when the path's bounds and the box's (``center +-
+        extent``) are apart along a world axis, both grown (``grow``, ``REJECT_SLACK``):
+        ``|rel_i| > (extent_i + grow_i) (1 + REJECT_SLACK) + reach_i`` on some axis ``i``
+        (``Path.reach``: half the chord, padded for the rounding of its midpoint)."""
         rel = q.mid - center
         out = int(0)
         for i in range(3):
@@ -151,9 +154,10 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
 
     @wp.func(inline=True)
     def apart_branch_free(q: Path, center: vec3, extent: vec3):
-        """:func:`apart` with one comparison: of the axis where the bounds are the most apart,
-        ``max_i (|rel_i| - lim_i) > 0`` (``x - y > 0`` exactly when ``x > y``: no rounding of
-        a difference changes its sign, so the verdicts are those of the test per axis)."""
+        """:func:`apart_per_axis` with one comparison: of the axis where the bounds are the
+        most apart, ``max_i (|rel_i| - lim_i) > 0`` (``x - y > 0`` exactly when ``x > y``: no
+        rounding of a difference changes its sign, so the verdicts are those of the test per
+        axis)."""
         rel = q.mid - center
         lim = wp.cw_mul(extent + q.grow, vec3(SLACK, SLACK, SLACK)) + q.reach
         o0 = wp.abs(rel[0]) - lim[0]
@@ -165,15 +169,12 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
             out = 1
         return out
 
-    # In a fast swarm whether a box passes the reject is a coin toss, and a branch per axis
-    # mispredicts: the branch-free form takes 0.78 to 0.83x the float32 frame at 60 m/s in the
-    # standard room; in float64 it measured no gain at 60 m/s and 1.10x the frame at 5 m/s
-    # (BENCHMARKS.md, "Fast spheres: a reject without branches").
+    # The reject the loops use, the same verdicts either way. In a fast swarm whether a box
+    # passes is a coin toss, and a branch per axis mispredicts: the branch-free form takes 0.78
+    # to 0.89x the float32 frame at 60 m/s in the standard room; in float64 it measured no gain
+    # at 60 m/s and 1.10x the frame at 5 m/s (BENCHMARKS.md, "Fast spheres: a reject without
+    # branches").
     apart = apart_branch_free if p.name == "float32" else apart_per_axis
-    apart.__doc__ = """The reject: 1 when the path's bounds and the box's (``center +-
-        extent``) are apart along a world axis, both grown (``grow``, ``REJECT_SLACK``):
-        ``|rel_i| > (extent_i + grow_i) (1 + REJECT_SLACK) + reach_i`` on some axis ``i``
-        (``Path.reach``: half the chord, padded for the rounding of its midpoint)."""
 
     @wp.func
     def grid_fits_path(a: vec3, b: vec3, mid: vec3, grow: vec3, broad: BroadPhase):
