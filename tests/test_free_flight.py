@@ -11,6 +11,14 @@ every box's bounds skips the bounce loop).
   that is not free: the state is the same whatever the split into launches, the recording
   stride, the threads and the births; over a long flight the motion stays on the parabola and
   the energy at its start, to the rounding of the frames between resets.
+
+The kernels compared are built with every optional feature a run of free frames touches (spin,
+losses, births) and with brute force, whatever the scene would choose (:func:`every_feature`):
+the step's code is then all there, and the tests share a handful of kernel variants instead of
+compiling one per scene. A variant with spin, losses or births on runs a scene without them as
+well (no friction, a retention of 1, every sphere born at frame 0); each test compares variants
+that differ only in what it tests. The choice of the variant for a scene is tested in
+``test_kernel_variants.py``.
 """
 
 import warnings
@@ -35,6 +43,18 @@ def with_features(sim: ws.Simulator, **changes) -> ws.Simulator:
     sim._features = sim._features.but(**changes)
     sim._kernel = frame_kernel(sim._features)
     return sim
+
+
+#: The optional features the kernels of these tests are built with.
+EVERY_FEATURE = dict(spin=True, lossy=True, births=True)
+
+
+def every_feature(scene: ws.Scene, swarm: ws.Swarm, **kw) -> ws.Simulator:
+    """A simulator of ``scene`` and ``swarm`` with brute force and the kernel built with
+    :data:`EVERY_FEATURE` (and the free-flight step when the swarm starts beyond the boxes'
+    bounds, as the scene's own choice)."""
+    return with_features(ws.Simulator(scene, swarm, broad_phase="brute", device="cpu", **kw),
+                         **EVERY_FEATURE)
 
 
 def with_step(sim: ws.Simulator, on: bool) -> ws.Simulator:
@@ -71,17 +91,16 @@ def test_free_flight_step_is_the_bounce_loops_bits(precision, motion, scene_name
         scene = ws.Scene.load(scene_name)
         swarm = scene.spawn(n=200, seed=11)
         frames = 90
-    sims = [ws.Simulator(scene, swarm, precision=precision, motion=motion, device="cpu")
-            for _ in range(3)]
+    sims = [every_feature(scene, swarm, precision=precision, motion=motion) for _ in range(3)]
     if scene_name == "far":  # spheres start beyond the boxes' bounds: the step is built in
         assert sims[0]._features.free_flight
     with_step(sims[0], True)
     without_free_flight(with_step(sims[1], True))
     with_step(sims[2], False)
-    for sim in sims:
-        sim.step(frames)
-    for sim in sims[1:]:
+    runs = [sim.run(frames, every=frames, events=True) for sim in sims]
+    for sim, run in zip(sims[1:], runs[1:], strict=True):
         assert state_bytes(sim) == state_bytes(sims[0])
+        np.testing.assert_array_equal(run.events.position, runs[0].events.position)
         a, b = sims[0].stats, sim.stats
         assert (a.bounces, a.supports, a.capped) == (b.bounces, b.supports, b.capped)
 
@@ -104,8 +123,7 @@ def test_recorded_frames_of_free_runs_are_the_bounce_loops_bits(precision, motio
     birth = rng.integers(0, 40, n) if births else 0
     swarm = ws.Swarm(rng.uniform([-3, 0.2, -1], [3, 4, 1], (n, 3)), rng.uniform(-6, 6, (n, 3)),
                      radius=0.1, birth_frame=birth)
-    sims = [ws.Simulator(scene, swarm, precision=precision, motion=motion, device="cpu")
-            for _ in range(2)]
+    sims = [every_feature(scene, swarm, precision=precision, motion=motion) for _ in range(2)]
     assert sims[0]._features.free_flight
     with_step(sims[0], True)
     with_step(sims[1], False)
@@ -153,8 +171,8 @@ def test_bounds_tested_once_for_many_frames_are_the_bits_of_a_test_every_frame(p
                             rng.uniform([-0.05, 0.0, -0.5], [0.05, 1.0, 0.5], (lobbed, 3))])
     birth = np.concatenate([swarm.birth_frame, rng.integers(0, 40, lobbed)])
     swarm = ws.Swarm(start, speed, radius=0.1, birth_frame=birth)
-    sims = [with_features(ws.Simulator(scene, swarm, precision=precision, motion=motion,
-                                       device="cpu"), free_horizon=on) for on in (True, False)]
+    sims = [with_features(every_feature(scene, swarm, precision=precision, motion=motion),
+                          free_horizon=on) for on in (True, False)]
     runs = [sim.run(150, every=7, velocities=True, events=True) for sim in sims]
     assert run_bytes(runs[0]) == run_bytes(runs[1])
     assert len(runs[0].events) == len(runs[1].events) > 0
@@ -242,8 +260,7 @@ def test_a_long_free_flight_stays_on_its_parabola_and_never_gains_energy(precisi
                      energy_correction=correction)
     with warnings.catch_warnings():  # float32 at 136 km: the far box only, never reached
         warnings.simplefilter("ignore", ws.PrecisionWarning)
-        sim = ws.Simulator(scene, ws.Swarm(p0, v0), precision=precision, motion=motion,
-                           device="cpu")
+        sim = every_feature(scene, ws.Swarm(p0, v0), precision=precision, motion=motion)
     assert sim._features.free_flight and sim._features.free_reset_every == FREE_RESET_EVERY
     dtype = sim.model.precision.np_dtype
     eps = float(np.finfo(dtype).eps)

@@ -96,3 +96,35 @@ def test_workers_default_and_bounds():
     assert small.workers == 1  # too few spheres to split
     with pytest.raises(ValueError, match="workers"):
         ws.Simulator(scene, scene.spawn(n=10, seed=0), workers=0, device="cpu")
+
+
+@pytest.mark.parametrize("events", [False, True])
+def test_shards_build_their_kernel_once_before_their_threads_launch(monkeypatch, events):
+    """The first launch of a kernel builds (or loads) its module; with several shards that
+    happens once, in the calling thread, not once in each shard's thread at the same time (two
+    threads building one module cost a core each, for a build as long)."""
+    import threading
+
+    from warp._src.context import Module
+
+    from warpsim.kernels.frame_kernel import frame_kernel
+
+    scene = ws.Scene.load("room")
+    sim = ws.Simulator(scene, scene.spawn(n=600, seed=2), workers=3, device="cpu")
+    assert sim.workers == 3
+    kernel = frame_kernel(sim._features.but(events=events))
+    kernel.module.unload()  # the next launch loads it again, as a first launch does
+    first_loads = []
+    load = Module.load
+
+    def spy(module, *args, **kwargs):
+        if module is kernel.module and not module.execs:
+            first_loads.append(threading.current_thread().name)
+        return load(module, *args, **kwargs)
+
+    monkeypatch.setattr(Module, "load", spy)
+    if events:
+        sim.run(3, events=True)
+    else:
+        sim.step(3)
+    assert first_loads == [threading.current_thread().name]

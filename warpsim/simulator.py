@@ -316,6 +316,9 @@ class Simulator:
         if len(calls) == 1:
             wp.launch(kernel, dim=self._n, device=self.device, inputs=calls[0])
         else:
+            # built (or loaded) here first: every thread's launch would otherwise build the same
+            # module at once on its first use, each on a core of its own
+            wp.load_module(kernel.module, device=self.device)
             pool = self._pool()
             futures = [pool.submit(wp.launch, kernel, dim=rows.stop - rows.start,
                                    device=self.device, inputs=args)
