@@ -41,7 +41,7 @@ from .arc import arc_funcs
 from .contact import contact_funcs
 from .data import Features, model_structs
 from .nearest import nearest_funcs
-from .nearest_arc import model_nearest_hit_arc, nearest_arc_funcs
+from .nearest_arc import leaving_funcs, model_nearest_hit_arc, nearest_arc_funcs
 from .precision import precision
 from .slide import LEG_DETACH, LEG_END, LEG_REGION, SHARP_SLIDE_ULPS, slide_funcs
 
@@ -82,8 +82,11 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
     scalar, vec3 = p.scalar, p.vec3
     Boxes, BroadPhase, Physics, EventBuffer = model_structs(p)
     nearest_hit_arc = model_nearest_hit_arc(p, features.broad_phase)
-    # the free legs' query: under gravity (``falls``) the arc's only
-    nearest_free_leg = model_nearest_hit_arc(p, features.broad_phase, features.falls)
+    # the free legs' query: under gravity (``falls``) the arc's only; it leaves out the box
+    # a bounce leaves for the rest of the frame
+    nearest_free_leg = model_nearest_hit_arc(p, features.broad_phase, features.falls,
+                                             leaves=True)
+    leaves_for_the_frame = leaving_funcs(p).leaves_for_the_frame
     arc_contact_centre = nearest_arc_funcs(p).arc_contact_centre
     arc_point = arc_funcs(p).arc_point
     separation_lift = nearest_funcs(p).separation_lift
@@ -589,8 +592,9 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         capped = int(0)
         supported = int(0)
         done = int(0)
+        left = int(-1)  # the box the rest of the frame's arc leaves (it cannot meet it again)
         while done == 0:
-            box, s, n = nearest_free_leg(a, v, g, rest, r, boxes, broad)
+            box, s, n = nearest_free_leg(a, v, g, rest, r, left, boxes, broad)
             if box < 0:
                 a = arc_point(a, v, g, rest)
                 v = v + rest * g
@@ -620,6 +624,9 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                     on_contact.event(frame, sphere, box, 0, contact, n, (dt - rest) / dt, -un,
                                      events)
                     a = contact
+                    left = int(-1)
+                    if leaves_for_the_frame(v, g, n, rest) == 1:
+                        left = box
         return a, v, L, energy, bounces, capped, supported
 
     return SimpleNamespace(ballistic_path=ballistic_path)

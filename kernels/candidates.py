@@ -88,8 +88,9 @@ def path_struct(p: Precision):
         left: int
         """A box the path cannot meet, not tried (-1: none): the one a chord has just bounced
         off, its rest leaving the surface (the rounded box is convex, so a straight path from
-        its surface outward never enters it again). Only the chord's loops read it
-        (:func:`candidate_funcs` ``leaves``)."""
+        its surface outward never enters it again), or the one an arc has just bounced off
+        and does not come back to in the frame (``nearest_arc.leaving_funcs``). Only loops
+        built with :func:`candidate_funcs` ``leaves`` read it."""
 
     return Path
 
@@ -249,8 +250,9 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
             ``"grid-bvh"`` the grid, the BVH as the fallback; ``"walk"`` the cells the path
             crosses, every box as the fallback (for a path :func:`walkable` refuses);
             ``"walk-bvh"`` the walk, the BVH as the fallback. Bit-identical whichever.
-        leaves: skip the box a path has left (``Path.left``): only for straight paths (a
-            chord cannot enter the convex box it leaves again; an arc can come back to it).
+        leaves: skip the box a path has left (``Path.left``): a chord cannot enter the
+            convex box it leaves again; an arc can come back to it, so its caller leaves a box
+            out only where it cannot (``nearest_arc.leaving_funcs``).
 
     Returns:
         Namespace with ``candidate``, ``nearest_brute``, ``nearest_cell``, ``nearest_bvh``,

@@ -24,6 +24,11 @@ from .data import model_structs
 from .nearest import model_nearest_hit, nearest_funcs
 from .precision import Precision
 
+#: How many times the frame's remaining time an arc bouncing off a box must take to come back
+#: to the plane of its contact before the next query leaves that box out
+#: (:func:`leaving_funcs`).
+RETURN_MARGIN = 2.0
+
 
 @cache
 def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
@@ -137,7 +142,8 @@ def nearest_arc_funcs(p: Precision) -> SimpleNamespace:
 
 
 @cache
-def model_nearest_hit_arc(p: Precision, broad_phase: str, falls: bool = False):
+def model_nearest_hit_arc(p: Precision, broad_phase: str, falls: bool = False,
+                          leaves: bool = False):
     """The arc's nearest-hit ``@wp.func`` the kernels call.
 
     Args:
@@ -147,36 +153,83 @@ def model_nearest_hit_arc(p: Precision, broad_phase: str, falls: bool = False):
             query; bit-identical whichever.
         falls: for a ``g`` known not to be zero: the arc's query only, without the chord's
             (the same answer for every ``g != 0``, from less code).
+        leaves: the query takes a box to leave out (``left``), one the arc cannot meet (see
+            :func:`leaves_for_the_frame`).
 
     Returns:
-        ``nearest_hit_arc(a, v, g, tau, r, boxes, broad) -> (box, s, normal)``: the first
-        contact along the arc (smallest ``s``; ties: the lower box index); ``box`` is -1 when
-        nothing is hit (then ``s = tau``, normal 0). ``g = 0`` is the chord's query of ``a ->
-        a + v tau`` (``s = t tau``), bit for bit.
+        ``nearest_hit_arc(a, v, g, tau, r, boxes, broad) -> (box, s, normal)``, with
+        ``leaves`` ``nearest_hit_arc(a, v, g, tau, r, left, boxes, broad)``: the first contact
+        along the arc (smallest ``s``; ties: the lower box index) over every box (but
+        ``left``; -1: none); ``box`` is -1 when nothing is hit (then ``s = tau``, normal 0).
+        ``g = 0`` is the chord's query of ``a -> a + v tau`` (``s = t tau``), bit for bit.
     """
     scalar, vec3 = p.scalar, p.vec3
     Boxes, BroadPhase, _, _ = model_structs(p)
     funcs = nearest_arc_funcs(p)
     arc_path = funcs.arc_path
-    nearest = candidate_funcs(p, funcs.sweep_arc, broad_phase).nearest
+    nearest = candidate_funcs(p, funcs.sweep_arc, broad_phase, leaves=leaves).nearest
     nearest_chord = model_nearest_hit(p, broad_phase)
     ZERO = scalar(0.0)
+
+    @wp.func(inline=True)
+    def nearest_but(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, left: int, boxes: Boxes,
+                    broad: BroadPhase):
+        """First contact of the sphere's arc over the boxes but ``left``, by the broad phase
+        compiled in."""
+        box = int(-1)
+        s = tau
+        normal = vec3(ZERO, ZERO, ZERO)
+        if wp.static(falls):
+            q = arc_path(a, v, g, tau, r)
+            q.left = left
+            box, s, normal = nearest(q, boxes, broad)
+        elif g[0] == ZERO and g[1] == ZERO and g[2] == ZERO:  # the chord's own query
+            box, t, normal = nearest_chord(a, v * tau, r, left, boxes, broad)
+            if box >= 0:
+                s = t * tau
+        else:
+            q = arc_path(a, v, g, tau, r)
+            q.left = left
+            box, s, normal = nearest(q, boxes, broad)
+        return box, s, normal
+
+    if leaves:
+        return nearest_but
 
     @wp.func(inline=True)
     def nearest_hit_arc(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, boxes: Boxes,
                         broad: BroadPhase):
         """First contact of the sphere's arc over the boxes, by the broad phase compiled in."""
-        box = int(-1)
-        s = tau
-        normal = vec3(ZERO, ZERO, ZERO)
-        if wp.static(falls):
-            box, s, normal = nearest(arc_path(a, v, g, tau, r), boxes, broad)
-        elif g[0] == ZERO and g[1] == ZERO and g[2] == ZERO:  # the chord's own query
-            box, t, normal = nearest_chord(a, v * tau, r, -1, boxes, broad)
-            if box >= 0:
-                s = t * tau
-        else:
-            box, s, normal = nearest(arc_path(a, v, g, tau, r), boxes, broad)
-        return box, s, normal
+        return nearest_but(a, v, g, tau, r, -1, boxes, broad)
 
     return nearest_hit_arc
+
+
+@cache
+def leaving_funcs(p: Precision) -> SimpleNamespace:
+    """``leaves_for_the_frame(v, g, n, rest) -> int``: whether the arc from a contact, with
+    velocity ``v`` [m/s] just after it, acceleration ``g`` [m/s^2] and the contact's outward
+    unit normal ``n`` (world frame), stays off the box it bounced off for the ``rest`` [s] of
+    the frame, so that the next query may leave that box out.
+
+    A rounded box is convex: it lies behind the plane through the contact normal to ``n``, and
+    the arc's height above that plane is ``h(s) = (v . n) s + 1/2 (g . n) s^2``, positive for
+    every ``s`` in ``(0, rest]`` when ``v . n > 0`` and, where gravity pulls it back
+    (``g . n < 0``), the arc comes back to the plane only at ``s = 2 (v . n) / -(g . n)``,
+    after ``rest``. The test asks that return time to be at least ``RETURN_MARGIN`` times
+    ``rest``, far beyond any rounding of ``v``, ``n`` and ``rest``. (The chord's rule is the
+    same with ``g = 0``: ``bounce.bounce_path``'s ``left``.)
+    """
+    scalar, vec3 = p.scalar, p.vec3
+    ZERO = scalar(0.0)
+    MARGIN = scalar(0.5 * RETURN_MARGIN)
+
+    @wp.func(inline=True)
+    def leaves_for_the_frame(v: vec3, g: vec3, n: vec3, rest: scalar):
+        vn = wp.dot(v, n)
+        out = int(0)
+        if vn > ZERO and vn >= -wp.dot(g, n) * rest * MARGIN:
+            out = 1
+        return out
+
+    return SimpleNamespace(leaves_for_the_frame=leaves_for_the_frame)
