@@ -172,6 +172,14 @@ def model_nearest_hit_arc(p: Precision, broad_phase: str, falls: bool = False,
     ZERO = scalar(0.0)
 
     @wp.func(inline=True)
+    def nearest_on_arc(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, left: int,
+                       boxes: Boxes, broad: BroadPhase):
+        """The arc's own query over the boxes but ``left``."""
+        q = arc_path(a, v, g, tau, r)
+        q.left = left
+        return nearest(q, boxes, broad)
+
+    @wp.func(inline=True)
     def nearest_but(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, left: int, boxes: Boxes,
                     broad: BroadPhase):
         """First contact of the sphere's arc over the boxes but ``left``, by the broad phase
@@ -180,17 +188,13 @@ def model_nearest_hit_arc(p: Precision, broad_phase: str, falls: bool = False,
         s = tau
         normal = vec3(ZERO, ZERO, ZERO)
         if wp.static(falls):
-            q = arc_path(a, v, g, tau, r)
-            q.left = left
-            box, s, normal = nearest(q, boxes, broad)
+            box, s, normal = nearest_on_arc(a, v, g, tau, r, left, boxes, broad)
         elif g[0] == ZERO and g[1] == ZERO and g[2] == ZERO:  # the chord's own query
             box, t, normal = nearest_chord(a, v * tau, r, left, boxes, broad)
             if box >= 0:
                 s = t * tau
         else:
-            q = arc_path(a, v, g, tau, r)
-            q.left = left
-            box, s, normal = nearest(q, boxes, broad)
+            box, s, normal = nearest_on_arc(a, v, g, tau, r, left, boxes, broad)
         return box, s, normal
 
     if leaves:
@@ -217,8 +221,9 @@ def leaving_funcs(p: Precision) -> SimpleNamespace:
     every ``s`` in ``(0, rest]`` when ``v . n > 0`` and, where gravity pulls it back
     (``g . n < 0``), the arc comes back to the plane only at ``s = 2 (v . n) / -(g . n)``,
     after ``rest``. The test asks that return time to be at least ``RETURN_MARGIN`` times
-    ``rest``, far beyond any rounding of ``v``, ``n`` and ``rest``. (The chord's rule is the
-    same with ``g = 0``: ``bounce.bounce_path``'s ``left``.)
+    ``rest``, far beyond any rounding of ``v``, ``n`` and ``rest``. (With ``g = 0`` this is
+    the chord's rule, ``bounce.bounce_path``'s ``left``, except that the chord also leaves out
+    a rest that runs along the surface, ``d . n = 0``.)
     """
     scalar, vec3 = p.scalar, p.vec3
     ZERO = scalar(0.0)
