@@ -183,6 +183,9 @@ def test_nearest_is_the_brute_force_minimum_bit_for_bit(seed, monkeypatch):
     if seed % 2:  # small chunks and grids: every boundary of the pair bookkeeping is crossed
         monkeypatch.setattr(obstacles, "PAIR_CHUNK", 7)
         monkeypatch.setattr(obstacles, "DIRECT_BOXES", 1)
+    if seed % 3 != 2:  # blocks of points on threads, more threads than cores on a small machine
+        monkeypatch.setattr(obstacles, "POINT_BLOCK", int(rng.integers(1, 200)))
+        monkeypatch.setattr(obstacles, "host_cores", lambda: 3)
     boxes = _mixed_boxes(rng, int(rng.integers(2, 400)))
     points = np.concatenate([rng.uniform(-40.0, 40.0, (600, 3)),
                              boxes.center[rng.integers(0, len(boxes), 50)]])  # at centres

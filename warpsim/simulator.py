@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -18,6 +17,7 @@ from .device import bvh_bounds, resolve_device
 from .kernels import precision as fp
 from .kernels.data import Features
 from .kernels.frame_kernel import frame_kernel
+from .machine import host_cores
 from .model import event_buffer, kernel_arguments, put_model, put_spheres, put_state
 from .scene import Scene
 from .swarm import Swarm
@@ -706,11 +706,7 @@ def _workers(workers, device, n: int) -> int:
         return 1
     if workers is not None:
         return max(1, min(workers, n))
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on every platform
-        cores = os.cpu_count() or 1
-    return max(1, min(cores, n // MIN_SHARD_SPHERES))
+    return max(1, min(host_cores(), n // MIN_SHARD_SPHERES))
 
 
 def _shards(n: int, workers: int) -> list[slice]:
