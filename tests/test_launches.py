@@ -128,3 +128,36 @@ def test_shards_build_their_kernel_once_before_their_threads_launch(monkeypatch,
     else:
         sim.step(3)
     assert first_loads == [threading.current_thread().name]
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_stepping_reads_the_states_the_simulator_holds_now(workers):
+    """``step`` packs its launch's arguments once per pair of states: a state set with
+    ``set_state``, or a state array replaced on the device state, is read from then on (the
+    arrays left behind are filled with NaN, so a launch that still read them would show)."""
+    import warp as wp
+
+    scene = ws.Scene.load("room")
+    swarm = scene.spawn(n=300, seed=2)
+    ref = ws.Simulator(scene, swarm, workers=workers, device="cpu")
+    start = ref.state()
+    ref.step(9)
+    sim = ws.Simulator(scene, ws.Swarm(position=swarm.position + [0.0, 0.01, 0.0],
+                                       velocity=-swarm.velocity, radius=swarm.radius,
+                                       mass=swarm.mass), workers=workers, device="cpu")
+    for _ in range(3):
+        sim.step(1)
+    left = [sim.state_0, sim.state_1]
+    sim.set_state(start)
+    for state in left:
+        state.position.fill_(float("nan"))
+        state.velocity.fill_(float("nan"))
+    sim.step(1)
+    sim.step(3)
+    old = sim.state_0.position
+    sim.state_0.position = wp.clone(old)
+    old.fill_(float("nan"))
+    for _ in range(5):
+        sim.step(1)
+    assert sim.frame == ref.frame == 9
+    assert state_bytes(sim) == state_bytes(ref)

@@ -12,14 +12,6 @@ SOURCE = Path(__file__).resolve().parent
 """The package's source folder: the git commit is read from the repository holding it."""
 
 
-def host_cores() -> int:
-    """The cores this process may run on (its affinity mask where the platform has one)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on every platform
-        return os.cpu_count() or 1
-
-
 def cpu_model() -> str:
     """The CPU's model name (``/proc/cpuinfo`` where there is one, else what Python knows)."""
     try:

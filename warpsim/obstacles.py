@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import validation as check
-from .machine import host_cores
+from .cores import host_cores
 
 IDENTITY_QUAT = (0.0, 0.0, 0.0, 1.0)
 
