@@ -278,8 +278,8 @@ def _normalised(q: np.ndarray, norm) -> np.ndarray:
 def unit_quat_array(name: str, value, count: int) -> np.ndarray:
     """``(count, 4)`` quaternions ``(x, y, z, w)``, finite and non-zero, returned normalised."""
     arr = _as_float_array(name, value)
-    if arr.ndim == 1 and arr.shape == (4,):
-        arr = np.tile(arr, (count, 1))
+    if arr.ndim == 1 and arr.shape == (4,):  # one for all: checked once, as a row, then copied
+        return np.tile(unit_quat_array(name, arr.reshape(1, 4), 1), (count, 1))
     if arr.shape != (count, 4):
         raise ValueError(f"{name} must have shape ({count}, 4) as (x, y, z, w), got {arr.shape}")
     _check_finite_rows(name, arr)
