@@ -161,3 +161,38 @@ def test_stepping_reads_the_states_the_simulator_holds_now(workers):
         sim.step(1)
     assert sim.frame == ref.frame == 9
     assert state_bytes(sim) == state_bytes(ref)
+
+
+def test_a_gpu_launch_holds_many_frames_and_a_recording_one_keeps_its_buffers_bounded(
+        monkeypatch):
+    """On a GPU, ``step`` launches hold 100 frames and more up to 1e7 spheres (10 at 1e8): a
+    frame there costs a fifth of a nanosecond a sphere, and one frame a launch made every frame
+    pay what a launch pays once. ``run``'s launches keep the CPU's budget on every device, as
+    the memory check (``footprint.run_bytes``) counts their record buffers."""
+    from types import SimpleNamespace
+
+    from warpsim import footprint
+    from warpsim import simulator as simulator_module
+
+    scene = ws.Scene.load("room")
+    sim = ws.Simulator(scene, scene.spawn(n=50, seed=1), device="cpu")
+    budget = simulator_module.LAUNCH_SPHERE_FRAMES
+    for n in (1, 50, 10**6, 10**7, 10**8):
+        monkeypatch.setattr(sim, "_n", n)
+        monkeypatch.setattr(sim, "device", SimpleNamespace(is_cpu=True))
+        cpu = sim._frames_per_launch()
+        monkeypatch.setattr(sim, "device", SimpleNamespace(is_cpu=False))
+        gpu = sim._frames_per_launch()
+        assert cpu == max(1, budget // n)
+        assert gpu >= cpu and gpu * n <= simulator_module.GPU_LAUNCH_SPHERE_FRAMES or gpu == 1
+        if n <= 10**7:
+            assert gpu >= 100
+        assert sim._frames_per_launch() >= (10 if n <= 10**8 else 1)
+        for every in (1, 3, 250):
+            for is_cpu in (True, False):
+                monkeypatch.setattr(sim, "device", SimpleNamespace(is_cpu=is_cpu))
+                frames = sim._frames_per_launch(every, records=True)
+                assert frames % every == 0 and frames >= every
+                rows = frames // every
+                expected = footprint.run_bytes(n, 2, every=every, launch_sphere_frames=budget)
+                assert 2 * rows * n * 7 * 4 <= max(expected.launch, 2 * n * 7 * 4)
