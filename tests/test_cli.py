@@ -313,3 +313,28 @@ def test_python_dash_m_warpsim_is_the_command_line():
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == f"warpsim {__version__}"
+
+
+def test_a_long_kernel_build_says_what_the_run_waits_for(tmp_path, capsys, monkeypatch):
+    """A build longer than ``BUILD_NOTICE_S`` (a first build for a GPU takes minutes) is named
+    on standard error while it runs; a quick one says nothing."""
+    import time
+
+    from warpsim.apps import cli as cli_module
+
+    real_build = ws.Simulator.build
+
+    def slow_build(self, events=False):
+        time.sleep(0.3)
+        return real_build(self, events=events)
+
+    monkeypatch.setattr(ws.Simulator, "build", slow_build)
+    monkeypatch.setattr(cli_module, "BUILD_NOTICE_S", 0.05)
+    code, _, err = cli(capsys, "run", "room", "-n", 5, "--frames", 2, "-o",
+                       tmp_path / "a.usdc", "--no-progress")
+    assert code == 0
+    assert "building the frame kernel for cpu (linear, float32): a first build" in err
+    monkeypatch.setattr(cli_module, "BUILD_NOTICE_S", 30.0)
+    code, _, err = cli(capsys, "run", "room", "-n", 5, "--frames", 2, "-o",
+                       tmp_path / "b.usdc", "--no-progress")
+    assert code == 0 and "building the frame kernel" not in err

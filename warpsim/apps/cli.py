@@ -30,6 +30,11 @@ EVENTS_SUFFIXES = (".parquet",)
 #: spheres x 301 frames: 1.6 MB -> 3.0 MB), a cost only motion-blurred renders need.
 VELOCITIES_DEFAULT = False
 
+#: Seconds a kernel build may take before ``run`` says what it is waiting for: a first build
+#: (Warp caches it after) takes 3 to 8 s on a CPU, and the ballistic frame kernel about 3
+#: minutes for a GPU (BENCHMARKS.md "GPU: an NVIDIA H200").
+BUILD_NOTICE_S = 10.0
+
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line, usage exit code
@@ -410,7 +415,7 @@ def _cmd_run(args) -> int:
     print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "
           f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
           f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
-    build = sim.build(events=bool(args.events))  # reported apart from the run's speed
+    build = _build_with_notice(sim, bool(args.events))  # reported apart from the run's speed
     if start:
         sim.step(start)
     if args.rerun is not None:  # also samples the energy and the counters at each record
@@ -536,6 +541,25 @@ def _cmd_preview(args) -> int:
     path = export.render_preview(args.usd, int(frame), args.output, size=args.size, **angles)
     print(f"wrote {path} (frame {frame}, {args.size[0]}x{args.size[1]})")
     return 0
+
+
+def _build_with_notice(sim, events: bool) -> float:
+    """``sim.build(events)``, saying on standard error what the command waits for when the
+    build takes more than ``BUILD_NOTICE_S`` seconds; returns the build's seconds."""
+    import threading
+
+    def notice():
+        print(f"building the frame kernel for {sim.device} ({sim.motion}, {sim.precision}): "
+              f"a first build, kept in Warp's kernel cache for the next runs; the ballistic "
+              f"kernel takes minutes for a GPU", file=sys.stderr, flush=True)
+
+    timer = threading.Timer(BUILD_NOTICE_S, notice)
+    timer.daemon = True
+    timer.start()
+    try:
+        return sim.build(events=events)
+    finally:
+        timer.cancel()
 
 
 def _cmd_bench(argv: list[str]) -> int:
