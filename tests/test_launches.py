@@ -163,6 +163,23 @@ def test_stepping_reads_the_states_the_simulator_holds_now(workers):
     assert state_bytes(sim) == state_bytes(ref)
 
 
+def test_set_state_lets_go_of_the_states_it_replaces():
+    """The launches ``step`` recorded hold the states' arrays; ``set_state`` drops them with the
+    states, so a large swarm's old state is freed at once, not at the next step."""
+    import gc
+    import weakref
+
+    scene = ws.Scene.load("room")
+    sim = ws.Simulator(scene, scene.spawn(n=50, seed=1), device="cpu")
+    sim.step(1)
+    sim.step(1)  # a launch recorded for each order of the two states
+    old = [weakref.ref(getattr(state, name)) for state in (sim.state_0, sim.state_1)
+           for name in ("position", "velocity", "energy")]
+    sim.set_state(sim.state())
+    gc.collect()
+    assert all(ref() is None for ref in old)
+
+
 def test_a_gpu_launch_holds_many_frames_and_a_recording_one_keeps_its_buffers_bounded(
         monkeypatch):
     """On a GPU, ``step`` launches hold 100 frames and more up to 1e7 spheres (10 at 1e8): a

@@ -605,6 +605,7 @@ class Simulator:
                   "orientation": np.asarray(state.orientation, dtype=np.float64)}
         check.unit_quat_array("state.orientation", state.orientation, n)
         frame = check.positive_int("state.frame", state.frame, minimum=0)
+        self._step_launches.clear()  # they hold the states replaced here
         self.state_0 = put_state(self._p, self.device, **values)
         unwritten = () if self.spin else ("angular_momentum", "orientation")
         self.state_1 = self.state_0.empty_like(share=unwritten)
