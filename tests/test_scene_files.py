@@ -447,6 +447,16 @@ def test_emitter_velocity_jitter_and_ranges():
     assert (s.orientation == [0.0, 0.0, 0.0, 1.0]).all()
 
 
+@pytest.mark.parametrize("spin", [(0.0, 0.0, 0.0), (-0.0, 0.0, 0.0), (0.0, 1e-300, 0.0)])
+def test_emitter_angular_momentum_keeps_its_bits(spin):
+    """Every sphere starts with the emitter's angular momentum, bit for bit (a negative zero
+    too: a spinning kernel's arithmetic can carry its sign)."""
+    s = Emitter(count=50, angular_momentum=spin).spawn(FLOOR)
+    expected = np.tile(np.asarray(spin, dtype=np.float64), (50, 1))
+    assert s.angular_momentum.shape == (50, 3)
+    assert s.angular_momentum.tobytes() == expected.tobytes()
+
+
 @pytest.mark.parametrize("cone_deg", [0.0, 20.0, 180.0])
 def test_emitter_speed_range_and_cone(cone_deg):
     direction = np.array([1.0, 2.0, -2.0]) / 3.0

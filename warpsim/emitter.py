@@ -229,9 +229,10 @@ class Emitter:
             parts.append((radius, mass, velocity, births, position_rng))
         positions = self._positions([rng for *_, rng in parts], boxes,
                                     [radius for radius, *_ in parts])
+        spin = np.asarray(self.angular_momentum, dtype=np.float64)
+        still = not spin.any() and not np.signbit(spin).any()  # +0.0 each: the Swarm default
         return [Swarm(position=position, velocity=velocity, radius=radius, mass=mass,
-                      angular_momentum=np.tile(np.asarray(self.angular_momentum),
-                                               (radius.shape[0], 1)),
+                      angular_momentum=None if still else np.tile(spin, (radius.shape[0], 1)),
                       birth_frame=births)
                 for (radius, mass, velocity, births, _), position
                 in zip(parts, positions, strict=True)]
