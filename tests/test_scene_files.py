@@ -447,6 +447,38 @@ def test_emitter_velocity_jitter_and_ranges():
     assert (s.orientation == [0.0, 0.0, 0.0, 1.0]).all()
 
 
+@pytest.mark.parametrize("emitter", [
+    Emitter(count=1, velocity=(1.0, -2.0, 0.5), velocity_jitter=(0.5, 0.0, 0.25)),
+    Emitter(count=1, speed=(1.0, 300.0), cone_deg=10.0, direction=(0.3, -1.0, 2.0),
+            velocity=(-0.0, 1.0, 0.0), velocity_jitter=(0.0, 2.0, 0.0)),
+    Emitter(count=1, speed=(5.0, 5.0), cone_deg=0.0, direction=(0.0, 0.0, -1.0)),
+    Emitter(count=1, speed=(0.0, 60.0), cone_deg=180.0, direction=(1.0, 0.0, 0.0)),
+])
+def test_emitter_velocities_are_the_written_formula_bit_for_bit(emitter):
+    """The draw's in-place arithmetic gives, bit for bit, the formula written out:
+    ``v0 + j U + s (cos(theta) a + sin(theta) cos(phi) u + sin(theta) sin(phi) w)``."""
+    import math
+
+    from warpsim.emitter import _orthonormal_pair
+
+    n = 4000
+    got = emitter._velocities(np.random.default_rng(3), n)
+    rng = np.random.default_rng(3)
+    expected = (np.asarray(emitter.velocity) + np.asarray(emitter.velocity_jitter)
+                * rng.uniform(-1.0, 1.0, size=(n, 3)))
+    if emitter.speed is not None:
+        speed = rng.uniform(*emitter.speed, size=n)
+        cos_theta = rng.uniform(math.cos(math.radians(emitter.cone_deg)), 1.0, size=n)
+        phi = rng.uniform(0.0, 2.0 * math.pi, size=n)
+        sin_theta = np.sqrt(np.maximum(0.0, 1.0 - cos_theta * cos_theta))
+        axis = np.asarray(emitter.direction) / np.linalg.norm(emitter.direction)
+        u, w = _orthonormal_pair(axis)
+        expected = expected + speed[:, None] * (cos_theta[:, None] * axis
+                                                + (sin_theta * np.cos(phi))[:, None] * u
+                                                + (sin_theta * np.sin(phi))[:, None] * w)
+    assert got.tobytes() == expected.tobytes()
+
+
 @pytest.mark.parametrize("spin", [(0.0, 0.0, 0.0), (-0.0, 0.0, 0.0), (0.0, 1e-300, 0.0)])
 def test_emitter_angular_momentum_keeps_its_bits(spin):
     """Every sphere starts with the emitter's angular momentum, bit for bit (a negative zero
