@@ -20,14 +20,13 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
-import os
 import re
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from . import common
 from .common import RESULTS, markdown_table
 
 FACTORIES = ("frame", "collide", "bounce")
@@ -141,15 +140,10 @@ def run_child(spec: dict) -> dict:
     """One variant in a subprocess with its own empty cache folder (removed afterwards)."""
     with tempfile.TemporaryDirectory(prefix="warpsim-build-") as cache:
         start = time.perf_counter()
-        proc = subprocess.run(
-            [sys.executable, "-m", "benchmarks.build_times", "--child", json.dumps(spec),
-             "--cache", cache], capture_output=True, text=True, timeout=CHILD_TIMEOUT_S,
-            cwd=Path(__file__).resolve().parents[1], env=dict(os.environ))
+        args = ["--child", json.dumps(spec), "--cache", cache]
+        result = common.run_child("build_times", args, CHILD_TIMEOUT_S)
         wall = time.perf_counter() - start
-    if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or ["no output"])[-1]
-        return {"error": tail, "process_s": wall}
-    return {**json.loads(proc.stdout.strip().splitlines()[-1]), "process_s": wall}
+    return {**result, "process_s": wall}
 
 
 def summary(rows: list[dict]) -> list[str]:

@@ -142,6 +142,21 @@ def start(name: str, args: argparse.Namespace):
     return device, info, out
 
 
+def run_child(module: str, args: list[str], timeout: float) -> dict:
+    """``python -m benchmarks.MODULE ARGS`` in a fresh process from the repository root; the
+    dict its last line of output holds (JSON), or ``{"error": its last line of errors}``."""
+    import json
+    import os
+    import subprocess
+
+    proc = subprocess.run([sys.executable, "-m", f"benchmarks.{module}", *args],
+                          capture_output=True, text=True, timeout=timeout,
+                          cwd=Path(__file__).resolve().parents[1], env=dict(os.environ))
+    if proc.returncode != 0:
+        return {"error": (proc.stderr.strip().splitlines() or ["no output"])[-1]}
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
 def finish(out: Path, results: dict, started: float) -> None:
     """Write the JSON atomically and say where it went."""
     results["runtime_s"] = time.perf_counter() - started

@@ -26,15 +26,13 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from .common import finish, parser, print_table, start
+from .common import finish, parser, print_table, run_child, start
 
 MOTIONS = ("linear", "ballistic")
 SPEED = 5.0
@@ -77,17 +75,6 @@ def child(spec: dict) -> dict:
             * 1e9, "digest": digest}
 
 
-def run_child(spec: dict) -> dict:
-    proc = subprocess.run([sys.executable, "-m", "benchmarks.opt_level", "--child",
-                           json.dumps(spec)], capture_output=True, text=True,
-                          timeout=CHILD_TIMEOUT_S, cwd=Path(__file__).resolve().parents[1],
-                          env=dict(os.environ))
-    if proc.returncode != 0:
-        tail = (proc.stderr.strip().splitlines() or ["no output"])[-1]
-        return {"error": tail}
-    return json.loads(proc.stdout.strip().splitlines()[-1])
-
-
 def main(argv: list[str] | None = None) -> int:
     p = parser("python -m benchmarks.opt_level", __doc__)
     p.add_argument("--levels", default="default,2",
@@ -116,7 +103,8 @@ def main(argv: list[str] | None = None) -> int:
                     spec = {"cache": str(Path(root) / f"{motion}-{level}"), "n": n,
                             "frames": frames, "repeats": max(1, args.repeats),
                             "device": str(device), "motion": motion, "level": level}
-                    samples[(motion, level)].append(run_child(spec))
+                    samples[(motion, level)].append(
+                        run_child("opt_level", ["--child", json.dumps(spec)], CHILD_TIMEOUT_S))
     rows = []
     for motion in MOTIONS:
         base = samples[(motion, levels[0])]

@@ -239,6 +239,9 @@ class Simulator:
         self._step_launches = {}
         """Recorded launches of :meth:`step` (``wp.Launch``, one per shard), by the arrays of
         the two states they read and write: :func:`_state_key`."""
+        names = parameter_names(self._kernel)
+        self._step_params = (names.index("frame_count"), names.index("first_frame"))
+        """The indices of the launch values :meth:`step` sets on its recorded launches."""
 
     # -- set-up -------------------------------------------------------------------------------
 
@@ -329,14 +332,12 @@ class Simulator:
                       else frame_kernel(self._features.but(events=True)))
             values = {"frame_count": int(frames), "record_every": int(every),
                       "first_frame": int(self.frame)}
-            shards = self._shards if len(self._shards) > 1 else [None]
+            shards = self._launch_rows()
             buffers = events if events is not None else [self._no_events] * len(shards)
-            calls = [self._arguments(kernel, rows, values, records, buffer)
-                     for rows, buffer in zip(shards, buffers, strict=True)]
-            self._run_launches(kernel, [partial(wp.launch, kernel, dim=self._n if rows is None
-                                                else rows.stop - rows.start,
-                                                device=self.device, inputs=args)
-                                        for rows, args in zip(shards, calls, strict=True)])
+            self._run_launches(kernel, [
+                partial(wp.launch, kernel, dim=self._rows_count(rows), device=self.device,
+                        inputs=self._arguments(kernel, rows, values, records, buffer))
+                for rows, buffer in zip(shards, buffers, strict=True)])
         self.state_0, self.state_1 = self.state_1, self.state_0
         self.frame += frames
 
@@ -352,21 +353,25 @@ class Simulator:
         if launches is None:
             if len(self._step_launches) >= 2:  # the two parities of the current states only
                 self._step_launches.clear()
-            wp.load_module(self._kernel.module, device=self.device)
             values = {"frame_count": 0, "record_every": 0, "first_frame": 0}
-            shards = self._shards if len(self._shards) > 1 else [None]
-            launches = [wp.launch(self._kernel, dim=self._n if rows is None
-                                  else rows.stop - rows.start, device=self.device,
+            launches = [wp.launch(self._kernel, dim=self._rows_count(rows), device=self.device,
                                   inputs=self._arguments(self._kernel, rows, values,
                                                          self._no_records, self._no_events),
                                   record_cmd=True)
-                        for rows in shards]
+                        for rows in self._launch_rows()]
             self._step_launches[key] = launches
-        names = parameter_names(self._kernel)
+        count, first = self._step_params
         for launch in launches:
-            launch.set_param_at_index(names.index("frame_count"), int(frames))
-            launch.set_param_at_index(names.index("first_frame"), int(self.frame))
+            launch.set_param_at_index(count, int(frames))
+            launch.set_param_at_index(first, int(self.frame))
         return [launch.launch for launch in launches]
+
+    def _launch_rows(self) -> list:
+        """The spheres of each launch: ``[None]`` (the whole swarm) or a slice per shard."""
+        return self._shards if len(self._shards) > 1 else [None]
+
+    def _rows_count(self, rows: slice | None) -> int:
+        return self._n if rows is None else rows.stop - rows.start
 
     def _run_launches(self, kernel, calls: list) -> None:
         """Make the calls that launch ``kernel`` on each shard, all shards at once on the
