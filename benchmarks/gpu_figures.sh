@@ -3,8 +3,8 @@
 # CUDA device: `bash benchmarks/gpu_figures.sh OUT_DIR [DEVICE]` (DEVICE defaults to cuda:0).
 # Writes OUT_DIR/log.txt, OUT_DIR/opt_level-cuda.json (the compiler level's study), one
 # OUT_DIR/bench-*.json per `warpsim bench` run and OUT_DIR/speed-cuda.json; each run has its
-# own time limit, so one slow run (the ballistic kernel's first build takes about 3 minutes)
-# cannot take the others' time.
+# own time limit, so one slow run (the study's build of the ballistic kernel at Warp's default
+# compiler level takes about 4 minutes) cannot take the others' time.
 set -uo pipefail
 out=${1:?usage: gpu_figures.sh OUT_DIR [DEVICE]}
 device=${2:-cuda:0}
@@ -23,7 +23,9 @@ timeout 600 python -m benchmarks.opt_level --device "$device" --rounds 2 \
     --out "$out/opt_level-cuda.json" 2>&1 | tee -a "$out/log.txt"
 bench room-1e6 120 room -n 1000000 --frames 300
 bench room-1e6-f64 120 room -n 1000000 --frames 300 --precision float64
-bench room-1e6-ballistic 400 room -n 1000000 --frames 300 --motion ballistic
+bench room-1e6-ballistic 120 room -n 1000000 --frames 300 --motion ballistic
+bench room-1e6-ballistic-f64 120 room -n 1000000 --frames 300 --motion ballistic \
+    --precision float64
 bench thin-1e6 120 thin-walls -n 1000000 --frames 100
 log "python -m benchmarks.speed --device $device --only room"
 timeout 300 python -m benchmarks.speed --device "$device" --only room \

@@ -5,16 +5,17 @@ Run from the repository root:
 ``python -m benchmarks.opt_level [--quick] [--device D] [--levels default,2] [--out PATH]``.
 
 Warp builds every module at an optimisation level, the module option ``optimization_level``:
-by default 3 for a GPU and 2 for the CPU. On an H200 the ballistic frame kernel's first build
-took 172 s at Warp's default, and built ahead of time for sm_90 it took 210 s at level 3 and
-7.9 s at level 2 (BENCHMARKS.md "GPU: an NVIDIA H200"); how fast the kernel runs at level 2 is
-what this study measures, for the linear and the ballistic models of the standard room
-(float32, spheres at 5 m/s).
+Warp's own default is 3 for a GPU and 2 for the CPU; this package builds its kernels at
+``warpsim.kernels.variant.OPTIMIZATION_LEVEL`` (2) on both. On an H200 the ballistic frame
+kernel's first build took 246 s at Warp's default and 2.9 s at level 2, at the same speed and
+with the same bits (``benchmarks/results/opt_level-cuda.json``, BENCHMARKS.md "GPU: an NVIDIA
+H200"): this study is what chose the level, for the linear and the ballistic models of the
+standard room (float32, spheres at 5 m/s).
 
 Each measurement runs in a fresh process with a kernel cache of its own per motion and level (a
 temporary folder): the first round's process builds the kernel there (its cold build time), the
 later rounds' processes load it. Each process sets the level on the simulator's kernel module
-before its first build (``default`` leaves Warp's choice), advances ``--frames`` frames once to
+before its first build (``default`` is Warp's own choice, the module option ``None``), advances ``--frames`` frames once to
 warm up, then times ``step(frames)`` (the median of ``--repeats``). The levels of a motion take
 turns within each round, so that a change of load falls on all of them alike; the figure is the
 median over the rounds, and ``identical`` says whether the final state is the default level's,
@@ -59,8 +60,8 @@ def child(spec: dict) -> dict:
     scene = ws.Scene.load("room")
     swarm = room_swarm(scene, spec["n"], SPEED, seed=SEED)
     sim = ws.Simulator(scene, swarm, device=spec["device"], motion=spec["motion"], workers=1)
-    if spec["level"] != "default":
-        sim._kernel.module.options["optimization_level"] = int(spec["level"])
+    sim._kernel.module.options["optimization_level"] = (
+        None if spec["level"] == "default" else int(spec["level"]))
     build_s = sim.build()
     sim.step(spec["frames"])
     times = []
