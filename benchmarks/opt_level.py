@@ -15,11 +15,11 @@ standard room (float32, spheres at 5 m/s).
 Each measurement runs in a fresh process with a kernel cache of its own per motion and level (a
 temporary folder): the first round's process builds the kernel there (its cold build time), the
 later rounds' processes load it. Each process sets the level on the simulator's kernel module
-before its first build (``default`` is Warp's own choice, the module option ``None``), advances ``--frames`` frames once to
-warm up, then times ``step(frames)`` (the median of ``--repeats``). The levels of a motion take
-turns within each round, so that a change of load falls on all of them alike; the figure is the
-median over the rounds, and ``identical`` says whether the final state is the default level's,
-bit for bit.
+before its first build (``default`` is Warp's own choice, the module option ``None``),
+advances ``--frames`` frames once to warm up, then times ``step(frames)`` (the median of
+``--repeats``). The levels of a motion take turns within each round, so that a change of load
+falls on all of them alike; the figure is the median over the rounds, and ``identical`` says
+whether the final state is the first level's, bit for bit.
 """
 
 from __future__ import annotations

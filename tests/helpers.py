@@ -196,3 +196,26 @@ def far_passes(feature: str, distance: float, big_r: float, dtype) -> list[dict]
                      "a": a.astype(dtype), "d": d.astype(dtype), "h": h,
                      "across": across, "axis_point": axis_point})
     return rows
+
+
+def emitter_velocity_formula(emitter, rng: np.random.Generator, n: int) -> np.ndarray:
+    """An emitter's ``n`` velocities drawn serially from ``rng``, the formula written out over
+    whole arrays: ``v0 + j U + s (cos(theta) a + sin(theta) cos(phi) u + sin(theta) sin(phi)
+    w)``, with U, then s, cos(theta) and phi drawn in turn."""
+    import math
+
+    from warpsim.emitter import _orthonormal_pair
+
+    expected = (np.asarray(emitter.velocity) + np.asarray(emitter.velocity_jitter)
+                * rng.uniform(-1.0, 1.0, size=(n, 3)))
+    if emitter.speed is not None:
+        speed = rng.uniform(*emitter.speed, size=n)
+        cos_theta = rng.uniform(math.cos(math.radians(emitter.cone_deg)), 1.0, size=n)
+        phi = rng.uniform(0.0, 2.0 * math.pi, size=n)
+        sin_theta = np.sqrt(np.maximum(0.0, 1.0 - cos_theta * cos_theta))
+        axis = np.asarray(emitter.direction) / np.linalg.norm(emitter.direction)
+        u, w = _orthonormal_pair(axis)
+        expected = expected + speed[:, None] * (cos_theta[:, None] * axis
+                                                + (sin_theta * np.cos(phi))[:, None] * u
+                                                + (sin_theta * np.sin(phi))[:, None] * w)
+    return expected

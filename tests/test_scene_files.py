@@ -457,26 +457,12 @@ def test_emitter_velocity_jitter_and_ranges():
 def test_emitter_velocities_are_the_written_formula_bit_for_bit(emitter):
     """The draw's in-place arithmetic gives, bit for bit, the formula written out:
     ``v0 + j U + s (cos(theta) a + sin(theta) cos(phi) u + sin(theta) sin(phi) w)``."""
-    import math
-
-    from warpsim.emitter import _orthonormal_pair
+    from helpers import emitter_velocity_formula
 
     n = 4000
     got = emitter._velocities(np.random.default_rng(3), n)
-    rng = np.random.default_rng(3)
-    expected = (np.asarray(emitter.velocity) + np.asarray(emitter.velocity_jitter)
-                * rng.uniform(-1.0, 1.0, size=(n, 3)))
-    if emitter.speed is not None:
-        speed = rng.uniform(*emitter.speed, size=n)
-        cos_theta = rng.uniform(math.cos(math.radians(emitter.cone_deg)), 1.0, size=n)
-        phi = rng.uniform(0.0, 2.0 * math.pi, size=n)
-        sin_theta = np.sqrt(np.maximum(0.0, 1.0 - cos_theta * cos_theta))
-        axis = np.asarray(emitter.direction) / np.linalg.norm(emitter.direction)
-        u, w = _orthonormal_pair(axis)
-        expected = expected + speed[:, None] * (cos_theta[:, None] * axis
-                                                + (sin_theta * np.cos(phi))[:, None] * u
-                                                + (sin_theta * np.sin(phi))[:, None] * w)
-    assert got.tobytes() == expected.tobytes()
+    assert got.tobytes() == emitter_velocity_formula(emitter, np.random.default_rng(3),
+                                                     n).tobytes()
 
 
 @pytest.mark.parametrize("spin", [(0.0, 0.0, 0.0), (-0.0, 0.0, 0.0), (0.0, 1e-300, 0.0)])

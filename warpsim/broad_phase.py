@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import validation as check
+from .blocks import for_row_blocks
 from .device import BVH_MIN_BOXES, bvh_bounds
 from .energy import lowest_potential
 from .kernels.candidates import BOUNDS_PAD_ABS, BOUNDS_PAD_REL, REJECT_SLACK, WALK_PAD_ULPS
@@ -189,12 +190,19 @@ def reach(position: np.ndarray, velocity: np.ndarray, radius: np.ndarray, gravit
         return 0.0
     g = np.asarray(gravity, dtype=np.float64)
     g_len = float(np.linalg.norm(g))
-    speed2 = np.einsum("ij,ij->i", velocity, velocity).astype(np.float64)
-    if lowest is not None:
-        fall = -(np.asarray(position, dtype=np.float64) @ g) - lowest
-        speed2 = speed2 + 2.0 * np.maximum(fall, 0.0)
-    half_path = 0.5 * (np.sqrt(speed2) + g_len * dt) * dt
-    return REACH_FACTOR * float(np.quantile(half_path + radius, REACH_QUANTILE))
+    position = np.asarray(position, dtype=np.float64)
+    radius = np.broadcast_to(np.asarray(radius, dtype=np.float64), position.shape[:1])
+    extent = np.empty(position.shape[0])  # half path plus radius, per sphere
+
+    def block(rows: slice) -> None:  # a row's value is its own: blocks on every core
+        speed2 = np.einsum("ij,ij->i", velocity[rows], velocity[rows]).astype(np.float64)
+        if lowest is not None:
+            fall = -(position[rows] @ g) - lowest
+            speed2 = speed2 + 2.0 * np.maximum(fall, 0.0)
+        extent[rows] = 0.5 * (np.sqrt(speed2) + g_len * dt) * dt + radius[rows]
+
+    for_row_blocks(position.shape[0], block)
+    return REACH_FACTOR * float(np.quantile(extent, REACH_QUANTILE))
 
 
 def build_grid(boxes: RoundedBoxes, margin: float, dtype=np.float32,

@@ -17,6 +17,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from . import validation as check
+from .blocks import for_row_blocks, stream_at
 from .obstacles import RoundedBoxes
 from .swarm import Swarm
 
@@ -261,36 +262,52 @@ class Emitter:
 
     def _velocities(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` velocities [m/s], (n, 3): the base velocity plus the jitter, plus a speed in a
-        direction uniform on the cone's cap. The arithmetic runs in place (each fresh array of
-        a million spheres costs tens of milliseconds to touch first), in the order of the
-        expression ``v0 + j * U + s * (c a + (q cos phi) u + (q sin phi) w)``."""
-        velocity = rng.uniform(-1.0, 1.0, size=(n, 3))
-        velocity *= np.asarray(self.velocity_jitter, dtype=np.float64)
-        np.add(np.asarray(self.velocity, dtype=np.float64), velocity, out=velocity)
-        if self.speed is None:
-            return velocity
-        speed = rng.uniform(*self.speed, size=n)
-        # Uniform on the spherical cap: cos(theta) uniform in [cos(cone), 1], azimuth uniform.
-        cos_theta = rng.uniform(math.cos(math.radians(self.cone_deg)), 1.0, size=n)
-        phi = rng.uniform(0.0, 2.0 * math.pi, size=n)
-        sin_theta = np.multiply(cos_theta, cos_theta)
-        np.subtract(1.0, sin_theta, out=sin_theta)
-        np.maximum(0.0, sin_theta, out=sin_theta)
-        np.sqrt(sin_theta, out=sin_theta)
-        axis = np.asarray(self.direction) / np.linalg.norm(self.direction)
-        u, w = _orthonormal_pair(axis)
-        d = np.multiply(cos_theta[:, None], axis)
-        part = np.empty_like(d)
-        along = np.cos(phi)
-        along *= sin_theta
-        np.multiply(along[:, None], u, out=part)
-        d += part
-        np.sin(phi, out=along)
-        along *= sin_theta
-        np.multiply(along[:, None], w, out=part)
-        d += part
-        d *= speed[:, None]
-        velocity += d
+        direction uniform on the cone's cap, in the order of the expression ``v0 + j * U + s *
+        (c a + (q cos phi) u + (q sin phi) w)``. The draws are those of one serial draw from
+        ``rng`` (U, then s, cos(theta) and phi, ``n`` each), and ``rng`` is left where that
+        draw would leave it; the rows are computed in blocks on every core
+        (:func:`warpsim.blocks.for_row_blocks`), the arithmetic in place in each block."""
+        state = rng.bit_generator.state
+        jitter = np.asarray(self.velocity_jitter, dtype=np.float64)
+        base = np.asarray(self.velocity, dtype=np.float64)
+        velocity = np.empty((n, 3))
+        if self.speed is not None:
+            cos_cone = math.cos(math.radians(self.cone_deg))
+            axis = np.asarray(self.direction) / np.linalg.norm(self.direction)
+            u, w = _orthonormal_pair(axis)
+
+        def block(rows: slice) -> None:
+            m = rows.stop - rows.start
+            v = velocity[rows]
+            v[...] = stream_at(state, 3 * rows.start).uniform(-1.0, 1.0, size=(m, 3))
+            v *= jitter
+            np.add(base, v, out=v)
+            if self.speed is None:
+                return
+            speed = stream_at(state, 3 * n + rows.start).uniform(*self.speed, size=m)
+            # Uniform on the spherical cap: cos(theta) uniform in [cos(cone), 1], azimuth
+            # uniform.
+            cos_theta = stream_at(state, 4 * n + rows.start).uniform(cos_cone, 1.0, size=m)
+            phi = stream_at(state, 5 * n + rows.start).uniform(0.0, 2.0 * math.pi, size=m)
+            sin_theta = np.multiply(cos_theta, cos_theta)
+            np.subtract(1.0, sin_theta, out=sin_theta)
+            np.maximum(0.0, sin_theta, out=sin_theta)
+            np.sqrt(sin_theta, out=sin_theta)
+            d = np.multiply(cos_theta[:, None], axis)
+            part = np.empty_like(d)
+            along = np.cos(phi)
+            along *= sin_theta
+            np.multiply(along[:, None], u, out=part)
+            d += part
+            np.sin(phi, out=along)
+            along *= sin_theta
+            np.multiply(along[:, None], w, out=part)
+            d += part
+            d *= speed[:, None]
+            v += d
+
+        for_row_blocks(n, block)
+        rng.bit_generator.advance((3 if self.speed is None else 6) * n)
         return velocity
 
     def _positions(self, rngs: list, boxes: RoundedBoxes,
@@ -300,7 +317,7 @@ class Emitter:
         (a point's distance does not depend on the others: each swarm's draws are its own)."""
         center = np.asarray(self.center)
         half = np.asarray(self.half_extents)
-        positions = [center + half * rng.uniform(-1.0, 1.0, size=(r.shape[0], 3))
+        positions = [_uniform_in_box(rng, r.shape[0], center, half)
                      for rng, r in zip(rngs, radii, strict=True)]
         pending = [np.arange(r.shape[0]) for r in radii]
         if len(boxes) == 0:
@@ -338,6 +355,24 @@ class Emitter:
             f"were not clear of the obstacles (signed distance >= radius + clearance) in "
             f"{MAX_PLACEMENT_ROUNDS} draws each; the obstacles fill almost all of the region "
             f"({self._region()}): move or enlarge it, or use smaller spheres")
+
+
+def _uniform_in_box(rng: np.random.Generator, n: int, center: np.ndarray,
+                    half: np.ndarray) -> np.ndarray:
+    """``center + half * rng.uniform(-1.0, 1.0, size=(n, 3))`` bit for bit, ``rng`` left where
+    that draw leaves it, the rows computed in blocks on every core."""
+    state = rng.bit_generator.state
+    out = np.empty((n, 3))
+
+    def block(rows: slice) -> None:
+        draw = stream_at(state, 3 * rows.start).uniform(-1.0, 1.0,
+                                                         size=(rows.stop - rows.start, 3))
+        draw *= half
+        np.add(center, draw, out=out[rows])
+
+    for_row_blocks(n, block)
+    rng.bit_generator.advance(3 * n)
+    return out
 
 
 def _orthonormal_pair(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .blocks import map_row_blocks
+
 ENERGY_FLOOR = 1e-12
 """Smallest energy scale [J]: a sphere at rest on the lowest point has nothing to lose."""
 
@@ -27,9 +29,10 @@ def region_bounds(boxes, position) -> tuple[np.ndarray, np.ndarray]:
         extent = boxes.world_extent()
         lows.append((boxes.center - extent).min(axis=0))
         highs.append((boxes.center + extent).max(axis=0))
-    if len(p):
-        lows.append(p.min(axis=0))
-        highs.append(p.max(axis=0))
+    if len(p):  # per block of rows on every core, then over the blocks: the same extremes
+        ends = map_row_blocks(len(p), lambda rows: (p[rows].min(axis=0), p[rows].max(axis=0)))
+        lows.append(np.min([low for low, _ in ends], axis=0))
+        highs.append(np.max([high for _, high in ends], axis=0))
     if not lows:
         return np.zeros(3), np.zeros(3)
     return np.min(lows, axis=0), np.max(highs, axis=0)

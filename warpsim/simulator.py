@@ -14,6 +14,7 @@ import warp as wp
 from . import broad_phase as broad
 from . import feasibility
 from . import validation as check
+from .blocks import for_row_blocks, map_row_blocks
 from .cores import host_cores
 from .device import bvh_bounds, resolve_device
 from .kernels import precision as fp
@@ -251,8 +252,7 @@ class Simulator:
         scene = self.scene
         # the energy of the state the device holds: positions and velocities rounded to the
         # kernels' precision first, so that E and Ep agree to rounding from the first frame
-        energy = self._energy_of(swarm.position.astype(p.np_dtype).astype(np.float64),
-                                 swarm.velocity.astype(p.np_dtype).astype(np.float64))
+        energy = self._energy_of(swarm.position, swarm.velocity, rounded_to=p.np_dtype)
         self._p = p
         self.model = put_model(scene.boxes, p, dev, broad_phase=self.broad_phase,
                                grid=self._grid, dt=self.dt,
@@ -643,10 +643,24 @@ class Simulator:
         s = self.state() if state is None else state
         return self._energy_of(s.position.astype(np.float64), s.velocity.astype(np.float64))
 
-    def _energy_of(self, position: np.ndarray, velocity: np.ndarray) -> np.ndarray:
-        g = self.scene.gravity
-        return (0.5 * self.mass * np.einsum("ij,ij->i", velocity, velocity)
-                - self.mass * ((position - self.energy_origin) @ g))
+    def _energy_of(self, position: np.ndarray, velocity: np.ndarray,
+                   rounded_to: np.dtype | None = None) -> np.ndarray:
+        """``1/2 m |v|^2 - m g . (p - origin)`` [J] per sphere, float64, of ``position`` and
+        ``velocity`` (N, 3) rounded to ``rounded_to`` first when given; in blocks of rows on
+        every core (each row's value is its own)."""
+        g = np.asarray(self.scene.gravity, dtype=np.float64)
+        energy = np.empty(position.shape[0])
+
+        def block(rows: slice) -> None:
+            p, v, m = position[rows], velocity[rows], self.mass[rows]
+            if rounded_to is not None:
+                p = p.astype(rounded_to).astype(np.float64)
+                v = v.astype(rounded_to).astype(np.float64)
+            energy[rows] = (0.5 * m * np.einsum("ij,ij->i", v, v)
+                            - m * ((p - self.energy_origin) @ g))
+
+        for_row_blocks(position.shape[0], block)
+        return energy
 
     @property
     def stats(self) -> Stats:
@@ -686,10 +700,19 @@ def _starts_in_free_flight(boxes, swarm: Swarm) -> bool:
     simulated apart could choose differently and differ by rounding: a run split into parts
     passes ``Simulator(free_flight=...)`` chosen for the whole run (the sharded runs and the
     command line take ``distributed.draw.may_start_free`` of the scene's emitter)."""
-    if len(swarm) == 0:
+    if len(swarm) == 0 or len(boxes) == 0:
         return False
-    r = swarm.radius[:, None]
-    return reaches_beyond_bounds(boxes, swarm.position - r, swarm.position + r)
+
+    def block(rows: slice) -> tuple[np.ndarray, np.ndarray]:
+        """Per axis, the highest of the block's spheres' lowest points and the lowest of their
+        highest points [m]."""
+        r = swarm.radius[rows, None]
+        return ((swarm.position[rows] - r).max(axis=0),
+                (swarm.position[rows] + r).min(axis=0))
+
+    lowest_top, highest_bottom = (np.array(v) for v in zip(*map_row_blocks(len(swarm), block),
+                                                            strict=True))
+    return reaches_beyond_bounds(boxes, lowest_top.max(axis=0), highest_bottom.min(axis=0))
 
 
 def reaches_beyond_bounds(boxes, low_end, high_end) -> bool:

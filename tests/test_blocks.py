@@ -1,0 +1,184 @@
+"""Host-side passes done in blocks of rows on several threads give what the whole-array formula
+gives, bit for bit: the helpers themselves (``warpsim.blocks``), and every pass that uses them,
+against its formula written out over the whole arrays, with tiny blocks on more threads than
+blocks' worth of cores so that every block boundary and thread interleaving is exercised."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from helpers import emitter_velocity_formula
+
+import warpsim as ws
+from warpsim import blocks, broad_phase, energy, feasibility, validation
+from warpsim.emitter import Emitter
+from warpsim.simulator import _starts_in_free_flight
+
+
+@pytest.fixture(params=[1, 3, 7, 64])
+def tiny_blocks(request, monkeypatch):
+    """Blocks of 1 to 64 rows, on 3 threads."""
+    monkeypatch.setattr(blocks, "ROW_BLOCK", request.param)
+    monkeypatch.setattr(blocks, "host_cores", lambda: 3)
+    return request.param
+
+
+@pytest.mark.parametrize("n", [0, 1, 5, 64, 65, 200])
+@pytest.mark.parametrize("size", [1, 4, 64])
+def test_row_blocks_cover_every_row_once_in_order(n, size):
+    parts = blocks.row_blocks(n, size)
+    rows = np.concatenate([np.arange(n)[p] for p in parts]) if parts else np.zeros(0)
+    assert rows.tolist() == list(range(n))
+    assert all(0 < p.stop - p.start <= size for p in parts)
+
+
+def test_map_row_blocks_keeps_the_order_and_raises_the_first_error(tiny_blocks):
+    n = 50
+    got = blocks.map_row_blocks(n, lambda rows: (rows.start, rows.stop))
+    assert got == [(p.start, p.stop) for p in blocks.row_blocks(n)]
+
+    def fail(rows):
+        if rows.start <= 10 < rows.stop or rows.start <= 30 < rows.stop:
+            raise ValueError(f"row {rows.start}")
+        return rows.start
+
+    with pytest.raises(ValueError, match="row"):
+        blocks.map_row_blocks(n, fail)
+
+
+@pytest.mark.parametrize("offset", [0, 1, 2, 3, 1000, 3 * 70_001])
+@pytest.mark.parametrize("seed", [0, 12345])
+def test_stream_at_continues_a_serial_draw(offset, seed):
+    serial = np.random.default_rng(seed)
+    before = dict(serial.bit_generator.state)
+    whole = serial.uniform(-2.0, 5.0, size=offset + 40)
+    rng = np.random.default_rng(seed)
+    state = rng.bit_generator.state
+    part = blocks.stream_at(state, offset).uniform(-2.0, 5.0, size=40)
+    assert part.tobytes() == whole[offset:].tobytes()
+    assert rng.bit_generator.state == before  # the source generator is untouched
+
+
+EMITTERS = [
+    Emitter(count=1, velocity=(1.0, -2.0, 0.5), velocity_jitter=(0.5, 0.0, 0.25)),
+    Emitter(count=1, speed=(1.0, 300.0), cone_deg=10.0, direction=(0.3, -1.0, 2.0),
+            velocity=(-0.0, 1.0, 0.0), velocity_jitter=(0.0, 2.0, 0.0)),
+    Emitter(count=1, speed=(0.0, 60.0), cone_deg=180.0, direction=(1.0, 0.0, 0.0)),
+]
+
+
+@pytest.mark.parametrize("emitter", EMITTERS)
+@pytest.mark.parametrize("n", [1, 50, 131])
+def test_emitter_velocities_in_blocks_are_the_serial_formula(emitter, n, tiny_blocks):
+    """The blocked draw is the serial draw from one generator, bit for bit, and leaves the
+    generator where the serial draw leaves it."""
+    rng = np.random.default_rng(3)
+    got = emitter._velocities(rng, n)
+    serial = np.random.default_rng(3)
+    assert got.tobytes() == emitter_velocity_formula(emitter, serial, n).tobytes()
+    assert rng.random() == serial.random()
+
+
+def test_emitter_positions_in_blocks_are_the_serial_draws(tiny_blocks):
+    """Start positions, redraws included (half the region is inside a block): each centre is
+    the serial stream's draw, the first clear one of its turns (an independent loop over the
+    draws), and every centre is clear."""
+    box = ws.RoundedBoxes(center=[[0.0, 0.0, 0.0]], half_extents=[[0.5, 1.0, 1.0]],
+                          radius=[0.1])
+    e = Emitter(count=97, half_extents=(1.0, 0.5, 0.5), radius=0.05, seed=11)
+    swarm = e.spawn(box)
+    position_stream = np.random.default_rng(np.random.SeedSequence(11).spawn(4)[3])
+    center, half = np.asarray(e.center), np.asarray(e.half_extents)
+    expected = center + half * position_stream.uniform(-1.0, 1.0, size=(97, 3))
+    need = swarm.radius + e.clearance
+    pending = np.arange(97)
+    for _ in range(200):
+        clear = box.signed_distance(expected[pending])[:, 0] >= need[pending]
+        pending = pending[~clear]
+        if pending.size == 0:
+            break
+        expected[pending] = center + half * position_stream.uniform(-1.0, 1.0,
+                                                                   size=(pending.size, 3))
+    assert swarm.position.tobytes() == expected.tobytes()
+
+
+def room_swarm(n: int, seed: int = 5) -> tuple[ws.Scene, ws.Swarm]:
+    scene = ws.Scene.load("room")
+    emitter = dataclasses.replace(scene.emitter, count=n)
+    return scene, emitter.spawn(scene.boxes, seed=seed)
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_initial_energy_in_blocks_is_the_formula(precision, tiny_blocks):
+    scene, swarm = room_swarm(150)
+    sim = ws.Simulator(scene, swarm, device="cpu", precision=precision, workers=1)
+    dtype = np.float32 if precision == "float32" else np.float64
+    p = swarm.position.astype(dtype).astype(np.float64)
+    v = swarm.velocity.astype(dtype).astype(np.float64)
+    g = np.asarray(scene.gravity, dtype=np.float64)
+    expected = (0.5 * swarm.mass * np.einsum("ij,ij->i", v, v)
+                - swarm.mass * ((p - sim.energy_origin) @ g))
+    assert np.asarray(sim.initial_energy).tobytes() == expected.tobytes()
+
+
+def test_reach_in_blocks_is_the_formula(tiny_blocks):
+    rng = np.random.default_rng(2)
+    n = 123
+    position = rng.normal(size=(n, 3)) * 3.0
+    velocity = rng.normal(size=(n, 3)) * 7.0
+    radius = rng.uniform(0.0, 0.2, size=n)
+    g, dt = np.array([0.0, -9.81, 0.0]), 1.0 / 60.0
+    for lowest in (None, -40.0):
+        speed2 = np.einsum("ij,ij->i", velocity, velocity)
+        if lowest is not None:
+            speed2 = speed2 + 2.0 * np.maximum(-(position @ g) - lowest, 0.0)
+        half_path = 0.5 * (np.sqrt(speed2) + float(np.linalg.norm(g)) * dt) * dt
+        expected = broad_phase.REACH_FACTOR * float(
+            np.quantile(half_path + radius, broad_phase.REACH_QUANTILE))
+        assert broad_phase.reach(position, velocity, radius, g, dt, lowest) == expected
+
+
+def test_region_bounds_and_norms_in_blocks_are_the_formula(tiny_blocks):
+    rng = np.random.default_rng(4)
+    p = rng.normal(size=(77, 3)) * np.array([1.0, 1e3, 1e-3])
+    p[40] = [1e200, -1e200, 0.0]  # norms without overflow in the squares
+    p[41] = 0.0
+    low, high = energy.region_bounds(ws.RoundedBoxes(center=np.zeros((0, 3)),
+                                                     half_extents=np.zeros((0, 3))), p)
+    assert low.tolist() == p.min(axis=0).tolist() and high.tolist() == p.max(axis=0).tolist()
+    scale = np.abs(p).max(axis=1)
+    safe = np.where(scale > 0.0, scale, 1.0)
+    expected = scale * np.linalg.norm(p / safe[:, None], axis=1)
+    assert feasibility._norms(p).tobytes() == expected.tobytes()
+
+
+@pytest.mark.parametrize("bad_rows", [[0], [5], [6, 2], [64, 65], [129]])
+def test_the_first_non_finite_row_is_named_across_blocks(bad_rows, tiny_blocks):
+    arr = np.ones((130, 3))
+    for i in bad_rows:
+        arr[i, i % 3] = np.nan if i % 2 else np.inf
+    with pytest.raises(ValueError, match=rf"^position\[{min(bad_rows)}\] must be finite"):
+        validation.vec3_array("position", arr)
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+@pytest.mark.parametrize("side", [-1.0, 1.0])
+@pytest.mark.parametrize("where", [0, 31, 99])
+def test_free_flight_choice_in_blocks_is_the_direct_test(axis, side, where, tiny_blocks):
+    """A sphere placed wholly beyond the obstacles' bounds on one side of one axis, or just
+    touching them (not beyond), at any row: the blocked choice is the direct test's."""
+    scene, swarm = room_swarm(100)
+    from warpsim.device import bvh_bounds
+    lower, upper = bvh_bounds(scene.boxes.center, scene.boxes.world_extent())
+    lo, hi = lower.min(axis=0), upper.max(axis=0)
+    for beyond in (True, False):
+        position = swarm.position.copy()
+        r = swarm.radius[where]
+        edge = hi[axis] + r if side > 0 else lo[axis] - r
+        position[where, axis] = edge + side * 1e-6 if beyond else edge
+        moved = ws.Swarm(position=position, velocity=swarm.velocity, radius=swarm.radius,
+                         mass=swarm.mass)
+        rr = moved.radius[:, None]
+        direct = bool(np.any(moved.position - rr > hi) or np.any(moved.position + rr < lo))
+        assert direct or not beyond  # the case is what it says
+        assert _starts_in_free_flight(scene.boxes, moved) == direct

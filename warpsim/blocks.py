@@ -1,0 +1,64 @@
+"""Long host-side passes over the spheres cut into blocks of rows spread over the cores, and
+random streams that start where a serial draw would be at a given row.
+
+A pass over millions of spheres in whole-array NumPy makes a fresh temporary array per
+operation, and touching fresh memory the first time is most of its cost; NumPy also lets go
+of the GIL inside its loops. A pass done block by block (:func:`for_row_blocks`) reuses its few
+small temporaries from one block to the next and runs its blocks on every core. It gives the
+same bits as the whole-array pass as long as each row's result depends on that row alone, in
+the same order of operations (element-wise arithmetic; the blocks of a random draw start where
+the serial draw would be: :func:`stream_at`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+import numpy as np
+
+from .cores import host_cores
+
+T = TypeVar("T")
+
+ROW_BLOCK = 1 << 16
+"""Rows per block (65 536): a block's float64 (rows, 3) temporary is 1.5 MiB, small enough to
+be reused from the allocator, large enough that NumPy's per-call overhead is lost in it."""
+
+
+def row_blocks(n: int, block: int | None = None) -> list[slice]:
+    """The consecutive row slices ``[0, block), [block, 2 block), ...`` covering ``n`` rows
+    (none for ``n = 0``)."""
+    size = ROW_BLOCK if block is None else block
+    return [slice(start, min(start + size, n)) for start in range(0, n, size)]
+
+
+def map_row_blocks(n: int, work: Callable[[slice], T], block: int | None = None) -> list[T]:
+    """``[work(rows) for rows in row_blocks(n, block)]``, the blocks on up to one thread per
+    core (inline when there is one block or one core): ``work`` must write only its own rows.
+    The first exception any block raises is raised here once every block is done."""
+    blocks = row_blocks(n, block)
+    threads = min(len(blocks), host_cores())
+    if threads <= 1:
+        return [work(rows) for rows in blocks]
+    with ThreadPoolExecutor(threads) as pool:
+        futures = [pool.submit(work, rows) for rows in blocks]
+        return [future.result() for future in futures]
+
+
+def for_row_blocks(n: int, work: Callable[[slice], object], block: int | None = None) -> None:
+    """:func:`map_row_blocks` for a ``work`` that writes its rows' results itself."""
+    map_row_blocks(n, work, block)
+
+
+def stream_at(state: dict, offset: int) -> np.random.Generator:
+    """A generator whose next draws are those a generator in ``state`` (its
+    ``bit_generator.state``) gives after ``offset`` 64-bit draws: one per float64 of
+    ``uniform`` or ``random``, so a block of rows starting at row ``lo`` of an ``(n, k)`` draw
+    starts at ``offset = k lo``. The generator in ``state`` is not changed. For PCG64, NumPy's
+    default and every draw's here (its ``advance`` counts 64-bit outputs)."""
+    bit_generator = getattr(np.random, state["bit_generator"])()
+    bit_generator.state = state
+    bit_generator.advance(offset)
+    return np.random.Generator(bit_generator)
