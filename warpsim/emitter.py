@@ -324,10 +324,14 @@ class Emitter:
             return positions
         for rounds in range(1, MAX_PLACEMENT_ROUNDS + 1):
             active = [j for j, p in enumerate(pending) if p.size]
-            need = [radii[j][pending[j]] + self.clearance for j in active]
+            # the first round tests every sphere: whole arrays, not gathered copies
+            need = [radii[j] + self.clearance if rounds == 1
+                    else radii[j][pending[j]] + self.clearance for j in active]
+            points = [positions[j] if rounds == 1 else positions[j][pending[j]]
+                      for j in active]
             distance, _ = boxes.nearest(
-                np.concatenate([positions[j][pending[j]] for j in active]),
-                within=np.concatenate(need))
+                points[0] if len(active) == 1 else np.concatenate(points),
+                within=need[0] if len(active) == 1 else np.concatenate(need))
             offset = 0
             for j, need_j in zip(active, need, strict=True):
                 n = radii[j].shape[0]
