@@ -182,3 +182,33 @@ def test_free_flight_choice_in_blocks_is_the_direct_test(axis, side, where, tiny
         direct = bool(np.any(moved.position - rr > hi) or np.any(moved.position + rr < lo))
         assert direct or not beyond  # the case is what it says
         assert _starts_in_free_flight(scene.boxes, moved) == direct
+
+
+@pytest.mark.parametrize("q", [(0.0, 0.0, 0.0, 1.0), (1.0, 2.0, -2.0, 4.0), (0.0, -0.0, 3.0, 0.0)])
+def test_one_orientation_for_all_in_blocks_is_the_tiled_row(q, tiny_blocks):
+    got = validation.unit_quat_array("orientation", q, 131)
+    row = np.asarray(q, dtype=np.float64)
+    norm = np.linalg.norm(row)
+    row = row if abs(norm - 1.0) <= validation.UNIT_SLACK else row / norm
+    assert got.shape == (131, 4)
+    assert got.tobytes() == np.tile(row, (131, 1)).tobytes()
+
+
+@pytest.mark.parametrize("bad", [0, 5, 64, 130])
+def test_the_first_too_large_row_is_named_across_blocks(bad, tiny_blocks):
+    """The start checks' per-row magnitudes in blocks: the first row whose coordinate, or whose
+    angular momentum, float32 cannot square is the one named."""
+    scene, swarm = room_swarm(131)
+    position = swarm.position.copy()
+    position[bad, 1] = -1e30
+    position[min(bad + 7, 130), 0] = 1e30
+    moved = ws.Swarm(position=position, velocity=swarm.velocity, radius=swarm.radius,
+                     mass=swarm.mass)
+    with pytest.raises(ValueError, match=rf"^position\[{bad}\] .* too large for float32"):
+        feasibility.check_run(scene, moved, scene.dt, "float32", 8)
+    spin = np.zeros((131, 3))
+    spin[bad, 2] = -1e39
+    spun = ws.Swarm(position=swarm.position, velocity=swarm.velocity, radius=swarm.radius,
+                    mass=swarm.mass, angular_momentum=spin)
+    with pytest.raises(ValueError, match=rf"^angular_momentum\[{bad}\] .* too large"):
+        feasibility.check_run(scene, spun, scene.dt, "float32", 8)

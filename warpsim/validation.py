@@ -285,7 +285,14 @@ def unit_quat_array(name: str, value, count: int) -> np.ndarray:
     """``(count, 4)`` quaternions ``(x, y, z, w)``, finite and non-zero, returned normalised."""
     arr = _as_float_array(name, value)
     if arr.ndim == 1 and arr.shape == (4,):  # one for all: checked once, as a row, then copied
-        return np.tile(unit_quat_array(name, arr.reshape(1, 4), 1), (count, 1))
+        row = unit_quat_array(name, arr.reshape(1, 4), 1)[0]
+        out = np.empty((count, 4))
+
+        def fill(rows: slice) -> None:  # blocks of rows on every core
+            out[rows] = row
+
+        for_row_blocks(count, fill)
+        return out
     if arr.shape != (count, 4):
         raise ValueError(f"{name} must have shape ({count}, 4) as (x, y, z, w), got {arr.shape}")
     _check_finite_rows(name, arr)
