@@ -316,7 +316,7 @@ def test_python_dash_m_warpsim_is_the_command_line():
 
 
 def test_a_long_kernel_build_says_what_the_run_waits_for(tmp_path, capsys, monkeypatch):
-    """A build longer than ``BUILD_NOTICE_S`` (a first build for a GPU takes minutes) is named
+    """A build longer than ``BUILD_NOTICE_S`` (a first build on a slow machine) is named
     on standard error while it runs; a quick one says nothing."""
     import time
 

@@ -31,8 +31,9 @@ EVENTS_SUFFIXES = (".parquet",)
 VELOCITIES_DEFAULT = False
 
 #: Seconds a kernel build may take before ``run`` says what it is waiting for: a first build
-#: (Warp caches it after) takes 3 to 8 s on a CPU, and the ballistic frame kernel about 3
-#: minutes for a GPU (BENCHMARKS.md "GPU: an NVIDIA H200").
+#: (Warp caches it after) takes 3 to 8 s on a CPU and 3 to 16 s for a GPU (BENCHMARKS.md "GPU:
+#: an NVIDIA H200"; minutes on a slow or loaded machine, or at Warp's default GPU compiler
+#: level, which the package no longer uses).
 BUILD_NOTICE_S = 10.0
 
 
@@ -550,8 +551,8 @@ def _build_with_notice(sim, events: bool) -> float:
 
     def notice():
         print(f"building the frame kernel for {sim.device} ({sim.motion}, {sim.precision}): "
-              f"a first build, kept in Warp's kernel cache for the next runs; the ballistic "
-              f"kernel takes minutes for a GPU", file=sys.stderr, flush=True)
+              f"a first build, kept in Warp's kernel cache for the next runs",
+              file=sys.stderr, flush=True)
 
     timer = threading.Timer(BUILD_NOTICE_S, notice)
     timer.daemon = True
