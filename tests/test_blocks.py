@@ -212,3 +212,25 @@ def test_the_first_too_large_row_is_named_across_blocks(bad, tiny_blocks):
                     mass=swarm.mass, angular_momentum=spin)
     with pytest.raises(ValueError, match=rf"^angular_momentum\[{bad}\] .* too large"):
         feasibility.check_run(scene, spun, scene.dt, "float32", 8)
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+@pytest.mark.parametrize("width", [1, 3, 4])
+def test_upload_in_blocks_is_the_cast(precision, width, tiny_blocks):
+    """The device copy of host values (``model.to_device``): each value rounded once to the
+    precision, as a whole-array cast rounds it, into an array of its own (not a view of the
+    input)."""
+    from warpsim.kernels import precision as fp
+    from warpsim.model import to_device
+
+    p = fp.precision(precision)
+    dtype = {1: p.scalar, 3: p.vec3, 4: p.quat}[width]
+    rng = np.random.default_rng(width)
+    values = rng.normal(size=(133, width)) * 10.0 ** rng.integers(-30, 30, size=(133, 1))
+    values = values[:, 0] if width == 1 else values
+    out = to_device(values, dtype, p, "cpu")
+    assert out.dtype == dtype and out.shape == (133,)
+    got = out.numpy()
+    assert got.tobytes() == np.ascontiguousarray(values, dtype=p.np_dtype).tobytes()
+    values[:] = 0.0
+    assert out.numpy().tobytes() == got.tobytes()  # not a view of the input

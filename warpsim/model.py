@@ -25,6 +25,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import warp as wp
 
+from .blocks import for_row_blocks
 from .broad_phase import Grid, WalkGrid
 from .device import bvh_bounds
 from .kernels.data import model_structs
@@ -111,8 +112,20 @@ class DeviceState:
 
 
 def to_device(values: np.ndarray, dtype, p: Precision, device) -> wp.array:
-    """A Warp array of ``dtype`` from float64 host values, cast to the precision's numpy type."""
-    return wp.array(np.ascontiguousarray(values, dtype=p.np_dtype), dtype=dtype, device=device)
+    """A Warp array of ``dtype`` from float64 host values ``(N, ...)``, cast to the precision's
+    numpy type (``p``'s; ``dtype`` is the Warp type of one row). The cast is written in blocks
+    of rows on every core straight into a Warp array on the host: on the CPU device that array
+    is the result; for a GPU it is copied over."""
+    values = np.asarray(values)
+    host = wp.empty(values.shape[0], dtype=dtype, device="cpu")
+    view = host.numpy()
+
+    def fill(rows: slice) -> None:
+        view[rows] = values[rows]
+
+    for_row_blocks(values.shape[0], fill)
+    device = wp.get_device(device)
+    return host if device.is_cpu else host.to(device)
 
 
 def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt: float,
