@@ -234,3 +234,12 @@ def test_upload_in_blocks_is_the_cast(precision, width, tiny_blocks):
     assert got.tobytes() == np.ascontiguousarray(values, dtype=p.np_dtype).tobytes()
     values[:] = 0.0
     assert out.numpy().tobytes() == got.tobytes()  # not a view of the input
+
+
+@pytest.mark.parametrize("n", [0, 1, 64, 131])
+@pytest.mark.parametrize("low,high", [(0.0, 1.0), (0.02, 0.02), (-3.0, 5.0)])
+def test_uniform_rows_are_the_serial_draw(n, low, high, tiny_blocks):
+    rng, serial = np.random.default_rng(9), np.random.default_rng(9)
+    got = blocks.uniform_rows(rng, low, high, n)
+    assert got.tobytes() == serial.uniform(low, high, size=n).tobytes()
+    assert rng.random() == serial.random()

@@ -62,3 +62,17 @@ def stream_at(state: dict, offset: int) -> np.random.Generator:
     bit_generator.state = state
     bit_generator.advance(offset)
     return np.random.Generator(bit_generator)
+
+
+def uniform_rows(rng: np.random.Generator, low, high, n: int) -> np.ndarray:
+    """``rng.uniform(low, high, size=n)`` bit for bit, the rows drawn in blocks on every core
+    (each block from :func:`stream_at`), ``rng`` left where that draw leaves it."""
+    state = rng.bit_generator.state
+    out = np.empty(n)
+
+    def block(rows: slice) -> None:
+        out[rows] = stream_at(state, rows.start).uniform(low, high, size=rows.stop - rows.start)
+
+    for_row_blocks(n, block)
+    rng.bit_generator.advance(n)
+    return out

@@ -17,7 +17,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from . import validation as check
-from .blocks import for_row_blocks, stream_at
+from .blocks import for_row_blocks, stream_at, uniform_rows
 from .obstacles import RoundedBoxes
 from .swarm import Swarm
 
@@ -218,8 +218,8 @@ class Emitter:
             # positions (and radii, masses) of a seed unchanged.
             radius_rng, mass_rng, velocity_rng, position_rng = (
                 np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4))
-            radius = radius_rng.uniform(*self.radius, size=n)
-            mass = mass_rng.uniform(*self.mass, size=n)
+            radius = uniform_rows(radius_rng, *self.radius, n)
+            mass = uniform_rows(mass_rng, *self.mass, n)
             velocity = self._velocities(velocity_rng, n)
             births = 0
             if self.emits_over_time:
