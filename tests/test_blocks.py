@@ -243,3 +243,14 @@ def test_uniform_rows_are_the_serial_draw(n, low, high, tiny_blocks):
     got = blocks.uniform_rows(rng, low, high, n)
     assert got.tobytes() == serial.uniform(low, high, size=n).tobytes()
     assert rng.random() == serial.random()
+
+
+def test_the_simulator_shares_the_swarms_frozen_arrays():
+    """Masses, radii and birth frames are the swarm's own read-only arrays, not copies: a
+    write into them is refused (it would not reach the device anyway)."""
+    scene, swarm = room_swarm(20)
+    sim = ws.Simulator(scene, swarm, device="cpu", workers=1)
+    assert sim.mass is swarm.mass and sim.birth_frame is swarm.birth_frame
+    for array in (sim.mass, sim.birth_frame):
+        with pytest.raises(ValueError, match="read-only"):
+            array[0] = 1

@@ -13,7 +13,7 @@ import pytest
 from helpers import shaped_half_extents
 
 import warpsim as ws
-from warpsim import feasibility, obstacles
+from warpsim import blocks, feasibility, obstacles
 from warpsim.obstacles import quat_to_matrix
 
 KINDS = ("box", "plate", "stick", "point", "cube")
@@ -185,7 +185,7 @@ def test_nearest_is_the_brute_force_minimum_bit_for_bit(seed, monkeypatch):
         monkeypatch.setattr(obstacles, "DIRECT_BOXES", 1)
     if seed % 3 != 2:  # blocks of points on threads, more threads than cores on a small machine
         monkeypatch.setattr(obstacles, "POINT_BLOCK", int(rng.integers(1, 200)))
-        monkeypatch.setattr(obstacles, "host_cores", lambda: 3)
+        monkeypatch.setattr(blocks, "host_cores", lambda: 3)
     boxes = _mixed_boxes(rng, int(rng.integers(2, 400)))
     points = np.concatenate([rng.uniform(-40.0, 40.0, (600, 3)),
                              boxes.center[rng.integers(0, len(boxes), 50)]])  # at centres

@@ -11,13 +11,12 @@ and for the check that no sphere starts inside an obstacle.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import validation as check
-from .cores import host_cores
+from .blocks import for_row_blocks
 
 IDENTITY_QUAT = (0.0, 0.0, 0.0, 1.0)
 
@@ -236,29 +235,21 @@ class RoundedBoxes:
         within = np.broadcast_to(np.asarray(within, dtype=np.float64), p.shape[:1])
         if not np.isfinite(within).all():
             raise ValueError("within must be finite")
-        distance = np.full(p.shape[0], np.inf)
-        index = np.full(p.shape[0], -1, dtype=np.int64)
         if len(self) == 0 or p.shape[0] == 0:
-            return distance, index
+            return np.full(p.shape[0], np.inf), np.full(p.shape[0], -1, dtype=np.int64)
+        distance = np.empty(p.shape[0])  # every block writes all of its own rows
+        index = np.empty(p.shape[0], dtype=np.int64)
         matrices = self.rotation_matrices()
         grow = max(float(within.max()), 0.0)
         reach = self.world_extent() + grow
         pad = BOUNDS_PAD_REL * (np.abs(self.center) + reach)
         lo, hi = self.center - reach - pad, self.center + reach + pad
 
-        def block(start: int) -> None:  # a point's answer depends on that point alone
-            part = slice(start, min(start + POINT_BLOCK, p.shape[0]))
+        def block(part: slice) -> None:  # a point's answer depends on that point alone
             distance[part], index[part] = self._nearest_among(p[part], within[part], lo, hi,
                                                               matrices)
 
-        starts = range(0, p.shape[0], POINT_BLOCK)
-        threads = min(len(starts), host_cores())
-        if threads <= 1:
-            for start in starts:
-                block(start)
-        else:  # NumPy lets go of the GIL inside its loops: the blocks share the cores
-            with ThreadPoolExecutor(threads) as pool:
-                list(pool.map(block, starts))
+        for_row_blocks(p.shape[0], block, POINT_BLOCK)  # blocks of points on every core
         return distance, index
 
     def _nearest_among(self, p, within, lo, hi, matrices) -> tuple[np.ndarray, np.ndarray]:

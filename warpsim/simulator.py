@@ -215,11 +215,14 @@ class Simulator:
         self.energy_origin = _energy_origin(scene, swarm)
         self.frame = 0
         self._n = len(swarm)
-        self.birth_frame = swarm.birth_frame.copy()
-        """The frame each sphere is born at, (N,), int64 (see :class:`warpsim.Swarm`)."""
-        self._radius_host = swarm.radius.copy()
-        self.mass = swarm.mass.copy()
-        """Sphere masses [kg], (N,), float64."""
+        # the swarm's own arrays, read-only (a Swarm owns and freezes what it holds): shared,
+        # not copied
+        self.birth_frame = swarm.birth_frame
+        """The frame each sphere is born at, (N,), int64, read-only (see
+        :class:`warpsim.Swarm`)."""
+        self._radius_host = swarm.radius
+        self.mass = swarm.mass
+        """Sphere masses [kg], (N,), float64, read-only."""
         self._seconds = 0.0
         # what the kernel is built for (the factory's cache key)
         self._features = Features(precision=self.precision, motion=self.motion,
