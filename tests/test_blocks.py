@@ -254,3 +254,31 @@ def test_the_simulator_shares_the_swarms_frozen_arrays():
     for array in (sim.mass, sim.birth_frame):
         with pytest.raises(ValueError, match="read-only"):
             array[0] = 1
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32, np.int32, np.uint16])
+def test_input_arrays_are_copied_in_blocks_to_float64(dtype, tiny_blocks):
+    """A numeric array given for a swarm's field is copied, in blocks, to float64 values of
+    its own: the whole-array conversion's values, strided inputs included, never a view."""
+    rng = np.random.default_rng(1)
+    base = (rng.normal(size=(140, 6)) * 1000).astype(dtype)
+    value = base[::2, 1::2]  # strided rows and columns
+    got = validation.vec3_array("position", value)
+    assert got.dtype == np.float64 and got.tobytes() == np.array(value, np.float64).tobytes()
+    base[:] = 0
+    assert np.any(got != 0.0)  # its own copy
+
+
+def test_scalars_are_checked_once_and_named_without_an_index(tiny_blocks):
+    assert validation.per_item("radius", 0.5, 70).tolist() == [0.5] * 70
+    assert np.signbit(validation.per_item("radius", -0.0, 3, minimum=0.0)).all()
+    with pytest.raises(ValueError, match=r"^radius must be >= 0, got -1$"):
+        validation.per_item("radius", -1.0, 70, minimum=0.0)
+    with pytest.raises(ValueError, match=r"^mass must be > 0, got 0$"):
+        validation.per_item("mass", 0.0, 70, positive=True)
+    assert validation.frame_array("birth_frame", 0, 70).tolist() == [0] * 70
+    assert validation.frame_array("birth_frame", np.uint8(7), 5).tolist() == [7] * 5
+    with pytest.raises(ValueError, match=r"^birth_frame must be >= 0, got -3$"):
+        validation.frame_array("birth_frame", -3, 70)
+    with pytest.raises(ValueError, match=r"^birth_frame\[4\] must be below 2\*\*31"):
+        validation.frame_array("birth_frame", [0, 1, 2, 3, 2**31], 5)

@@ -134,6 +134,15 @@ def _refuse_non_numbers(name: str, value) -> None:
 
 def _as_float_array(name: str, value) -> np.ndarray:
     _refuse_non_numbers(name, value)
+    if isinstance(value, np.ndarray) and value.ndim and value.dtype.kind in "iuf":
+        # a float64 copy of its own, made in blocks of rows on every core: the same values
+        out = np.empty(value.shape)
+
+        def copy(rows: slice) -> None:
+            out[rows] = value[rows]
+
+        for_row_blocks(value.shape[0], copy)
+        return out
     try:
         return np.array(value, dtype=np.float64, copy=True)
     except OverflowError:
@@ -190,8 +199,9 @@ def per_item(name: str, value, count: int, *, positive: bool = False,
              minimum: float | None = None) -> np.ndarray:
     """A scalar broadcast to ``(count,)``, or a ``(count,)`` array; finite, bounded."""
     arr = _as_float_array(name, value)
-    if arr.ndim == 0:
-        arr = np.full(count, float(arr))
+    one = arr.ndim == 0  # a scalar is checked once, then broadcast
+    if one:
+        arr = arr.reshape(1)
         label = name
     elif arr.shape == (count,):
         label = None
@@ -207,7 +217,7 @@ def per_item(name: str, value, count: int, *, positive: bool = False,
             i = first_bad_row(bad)
             where = label if label is not None else f"{name}[{i}]"
             raise ValueError(f"{where} {what}, got {arr[i]:g}")
-    return arr
+    return np.full(count, float(arr[0])) if one else arr
 
 
 def scalar_or_range(name: str, value, *, minimum: float | None = None,
@@ -370,8 +380,9 @@ def frame_array(name: str, value, count: int) -> np.ndarray:
     if arr.dtype.kind not in "iu":
         got = _short(value) if arr.ndim == 0 else f"an array of {arr.dtype}"
         raise ValueError(f"{name} must be integers, got {got}")
-    if arr.ndim == 0:
-        arr = np.full(count, int(arr), dtype=np.int64)
+    one = arr.ndim == 0  # a scalar is checked once, then broadcast
+    if one:
+        arr = arr.reshape(1).astype(np.int64)
         label = name
     elif arr.shape == (count,):
         arr = arr.astype(np.int64)
@@ -383,6 +394,9 @@ def frame_array(name: str, value, count: int) -> np.ndarray:
             i = first_bad_row(bad)
             where = label if label is not None else f"{name}[{i}]"
             raise ValueError(f"{where} {what}, got {arr[i]}")
+    if one:  # zeros: pages the system hands out zeroed, not written here
+        return (np.zeros(count, dtype=np.int64) if arr[0] == 0
+                else np.full(count, arr[0], dtype=np.int64))
     return arr
 
 
