@@ -282,3 +282,18 @@ def test_scalars_are_checked_once_and_named_without_an_index(tiny_blocks):
         validation.frame_array("birth_frame", -3, 70)
     with pytest.raises(ValueError, match=r"^birth_frame\[4\] must be below 2\*\*31"):
         validation.frame_array("birth_frame", [0, 1, 2, 3, 2**31], 5)
+
+
+@pytest.mark.parametrize("where", [None, 0, 63, 64, 130])
+def test_spin_and_births_are_found_in_any_block(where, tiny_blocks):
+    """A single spinning sphere, or a single one born late, at any row, is seen."""
+    scene, swarm = room_swarm(131)
+    spin = np.zeros((131, 3))
+    births = np.zeros(131, dtype=np.int64)
+    if where is not None:
+        spin[where, 2] = -1e-300
+        births[where] = 3
+    spun = ws.Swarm(position=swarm.position, velocity=swarm.velocity, radius=swarm.radius,
+                    mass=swarm.mass, angular_momentum=spin, birth_frame=births)
+    assert spun.has_births == (where is not None)
+    assert ws.Simulator(scene, spun, device="cpu", workers=1).spin == (where is not None)

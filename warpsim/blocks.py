@@ -76,3 +76,9 @@ def uniform_rows(rng: np.random.Generator, low, high, n: int) -> np.ndarray:
     for_row_blocks(n, block)
     rng.bit_generator.advance(n)
     return out
+
+
+def any_rows(n: int, test: Callable[[slice], np.ndarray]) -> bool:
+    """Whether ``test(rows)`` (a boolean array for those rows) holds anywhere, the blocks of
+    rows on every core."""
+    return any(bool(np.any(hit)) for hit in map_row_blocks(n, test))

@@ -14,7 +14,7 @@ import warp as wp
 from . import broad_phase as broad
 from . import feasibility
 from . import validation as check
-from .blocks import for_row_blocks, map_row_blocks
+from .blocks import any_rows, for_row_blocks, map_row_blocks
 from .cores import host_cores
 from .device import bvh_bounds, resolve_device
 from .kernels import precision as fp
@@ -211,7 +211,8 @@ class Simulator:
         self.device = resolve_device(device)
         self.workers = _workers(workers, self.device, len(swarm))
         """Threads that launch the frame kernel, each on a contiguous shard of the swarm."""
-        self.spin = bool(scene.friction > 0.0 or np.any(swarm.angular_momentum != 0.0))
+        self.spin = bool(scene.friction > 0.0 or any_rows(
+            len(swarm), lambda rows: swarm.angular_momentum[rows] != 0.0))
         self.energy_origin = _energy_origin(scene, swarm)
         self.frame = 0
         self._n = len(swarm)

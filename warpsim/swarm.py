@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import validation as check
+from .blocks import any_rows
 
 
 class Swarm:
@@ -49,7 +50,7 @@ class Swarm:
     @property
     def has_births(self) -> bool:
         """Whether some sphere is born after frame 0."""
-        return bool(np.any(self.birth_frame > 0))
+        return any_rows(len(self), lambda rows: self.birth_frame[rows] > 0)
 
     def __len__(self) -> int:
         return self.position.shape[0]
