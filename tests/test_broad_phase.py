@@ -140,6 +140,45 @@ def test_auto_keeps_brute_force_for_few_boxes(device):
     assert ws.Simulator(ws.Scene(boxes), swarm, device=device).broad_phase == "brute"
 
 
+@pytest.mark.parametrize("k", [0, 1, 2, 3])
+@pytest.mark.parametrize("seed", range(4))
+def test_auto_takes_the_models_choice_without_grids_where_none_can_win(k, seed, monkeypatch):
+    """``auto`` picks what the cost model picks over every option (``preferred`` of
+    ``estimates``); for a box or two no grid can cost less than the exhaustive method by the
+    model's floors, and none is built (a call for a few spheres then costs no grid)."""
+    from warpsim import broad_phase as broad
+
+    assert broad.GRID_FIXED <= broad.WALK_FIXED + broad.WALK_PER_CELL  # the floors compared
+    rng = np.random.default_rng(seed)
+    if seed < 2:  # boxes piled near the spheres, at any speed
+        boxes = ws.RoundedBoxes(rng.uniform(-2.0, 2.0, (k, 3)), rng.uniform(0.0, 0.5, (k, 3)),
+                                rotation=random_rotations(rng, k),
+                                radius=rng.uniform(0.0, 0.1, k))
+        position = rng.uniform(-3.0, 3.0, (50, 3)) + [0.0, 5.0, 0.0]
+        velocity = rng.normal(size=(50, 3)) * 10.0 ** rng.uniform(-1.0, 2.0)
+    else:  # boxes 40 m apart in a row, slow spheres between them: a grid pays from 3 boxes
+        centers = np.array([[-40.0, 0.0, 0.0], [0.0, 0.0, 0.0], [40.0, 0.0, 0.0]])[:k]
+        boxes = ws.RoundedBoxes(centers + rng.uniform(-1.0, 1.0, (k, 3)),
+                                np.tile([0.5, 2.0, 2.0], (k, 1)))
+        position = np.column_stack([rng.uniform(-38.0, 38.0, 50),
+                                    rng.uniform(-1.5, 1.5, (50, 2))])
+        position[np.abs(position[:, 0]) < 2.0, 0] += 10.0
+        velocity = rng.normal(size=(50, 3)) * 0.5
+    frame = broad.paths(position, velocity, np.full(50, 0.05), (0.0, -9.81, 0.0), DT, boxes)
+    expected = broad.preferred(broad.estimates(boxes, frame))
+    if k <= 2:
+        def refused(*args, **kwargs):
+            raise AssertionError("a grid was built")
+
+        monkeypatch.setattr(broad, "build_grid", refused)
+        monkeypatch.setattr(broad, "build_walk_grid", refused)
+    name, grid = broad.choose("auto", boxes, frame)
+    assert name == expected
+    if k == 3 and seed >= 2:
+        assert name == "grid"  # the case where the model's grid wins
+    assert (grid is None) == (name in ("brute", "bvh"))
+
+
 @pytest.mark.parametrize("broad_phase", ["brute", "bvh", "auto"])
 def test_no_boxes(device, broad_phase):
     empty = ws.RoundedBoxes(np.zeros((0, 3)), np.zeros((0, 3)))

@@ -562,6 +562,11 @@ def choose(requested: str, boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
         if grid is None:
             return exhaustive(k)[0], None
         name = choice + ("-bvh" if exhaustive(k)[0] == "bvh" else "")
+    elif exhaustive(k)[1] <= GRID_FIXED:
+        # no grid can win: by the model a margin grid costs at least GRID_FIXED and a walked
+        # one at least WALK_FIXED + WALK_PER_CELL, so a scene of a box or two takes its
+        # exhaustive method without building the grids (milliseconds a call for a few spheres)
+        name, grid = exhaustive(k)[0], None
     else:
         options = estimates(boxes, frame, dtype)
         name = preferred(options)
