@@ -376,3 +376,91 @@ def test_the_reject_without_branches_keeps_every_verdict(precision):
     meets = np.all(gap <= 0.0, axis=1)
     assert meets.sum() > n // 20 and (~meets).sum() > n // 4
     assert not out[meets, 1].any(), np.flatnonzero(meets & (out[:, 1] == 1))[:5]
+
+
+@cache
+def fit_forms_kernel(name: str):
+    from warpsim.kernels.candidates import bounds_funcs
+    from warpsim.kernels.data import model_structs
+    from warpsim.kernels.precision import precision as types_of
+    from warpsim.kernels.variant import variant_kernel
+
+    p = types_of(name)
+    funcs = bounds_funcs(p)
+    per_axis, branch_free = funcs.grid_fits_per_axis, funcs.grid_fits_branch_free
+    BroadPhase = model_structs(p).BroadPhase
+
+    @variant_kernel
+    def run(broad: BroadPhase, a: wp.array[p.vec3], b: wp.array[p.vec3],
+            mid: wp.array[p.vec3], grow: wp.array[p.vec3], out: wp.array2d[wp.int32]):
+        i = wp.tid()
+        fits, cell = per_axis(a[i], b[i], mid[i], grow[i], broad)
+        out[i, 0] = fits
+        out[i, 1] = cell
+        fits, cell = branch_free(a[i], b[i], mid[i], grow[i], broad)
+        out[i, 2] = fits
+        out[i, 3] = cell
+
+    return run
+
+
+def test_the_fit_without_branches_keeps_every_verdict_and_cell(precision):
+    """The branch-free grid fit (one comparison of the largest overhang, the cell clamped
+    and the clamp noted) against the test per axis: random paths whose midpoints lie inside
+    the grid, on its cell borders, just outside it and far beyond it on one axis or more, of
+    every length from a point to several cells, and paths whose ends sit exactly on, a few
+    ulps inside and a few ulps beyond their cell's grown bounds along one axis. The two forms
+    give the same verdict on every path and the same cell on every path that fits."""
+    from warpsim.kernels.precision import precision as types_of
+    from warpsim.model import put_model
+
+    p = types_of(precision)
+    rng = np.random.default_rng(23)
+    boxes, side = random_scene(40, rng)
+    grid = broad.build_grid(boxes, 0.35, p.np_dtype)
+    model = put_model(boxes, p, "cpu", broad_phase="grid", grid=grid, dt=DT)
+    n = 30_000
+    span = grid.dims * grid.cell
+    mid = grid.lower + rng.uniform(-0.2, 1.2, (n, 3)) * span
+    far = rng.random((n, 3)) < 0.05
+    mid = np.where(far, grid.lower + rng.choice([-1e3, 1e3], (n, 3)) * span, mid)
+    border = rng.random((n, 3)) < 0.3
+    mid = np.where(border, grid.lower + np.round((mid - grid.lower) / grid.cell) * grid.cell,
+                   mid)
+    half = (rng.uniform(0, 1, (n, 3)) * rng.choice([0.0, 0.1, 1.0, 4.0], (n, 1))
+            * grid.kernel_margin * rng.choice([-1, 1], (n, 3)))
+    grow = rng.uniform(0, 0.5, (n, 3)) * grid.kernel_margin * rng.choice([0.0, 1.0], (n, 1))
+    # one end exactly on (or a few ulps either side of) its cell's grown bound on one axis,
+    # the path short on the others, its midpoint inside the grid
+    dt = p.np_dtype
+    edge = np.flatnonzero(rng.random(n) < 0.4)
+    mid[edge] = grid.lower + rng.uniform(0.02, 0.98, (edge.size, 3)) * span
+    half[edge] *= (0.2 * grid.kernel_margin
+                   / np.abs(half[edge]).max(axis=1, keepdims=True).clip(1e-30))
+    grow[edge] = rng.uniform(0, 0.1, (edge.size, 3)) * grid.kernel_margin
+    a, b = mid - half, mid + half
+    axis = rng.integers(0, 3, edge.size)
+    m = mid[edge, axis].astype(dt).astype(np.float64)
+    lo_g = grid.lower[axis].astype(dt).astype(np.float64)
+    cell = grid.cell[axis].astype(dt).astype(np.float64)
+    c = np.floor((m - lo_g) / cell)
+    cell_lo = lo_g + c * cell
+    upper = rng.random(edge.size) < 0.5
+    bound = np.where(upper, cell_lo + cell + grid.kernel_margin,
+                     cell_lo - grid.kernel_margin)
+    ulps = rng.choice([-3, -1, 0, 0, 0, 1, 3], edge.size)
+    end = (bound * (1.0 + ulps * np.finfo(dt).eps)
+           + np.where(upper, -1.0, 1.0) * grow[edge, axis])
+    a[edge, axis] = np.where(upper, 2 * m - end, end)
+    b[edge, axis] = np.where(upper, end, 2 * m - end)
+    mid[edge, axis] = m
+    arrays = [wp.array(x.astype(dt), dtype=p.vec3, device="cpu") for x in (a, b, mid, grow)]
+    out = wp.zeros((n, 4), dtype=wp.int32, device="cpu")
+    wp.launch(fit_forms_kernel(precision), dim=n, inputs=[model.broad, *arrays, out],
+              device="cpu")
+    out = out.numpy()
+    assert np.array_equal(out[:, 0], out[:, 2]), np.flatnonzero(out[:, 0] != out[:, 2])[:5]
+    fits = out[:, 0] == 1
+    assert np.array_equal(out[fits, 1], out[fits, 3])
+    assert fits.sum() > n // 10 and (~fits).sum() > n // 10
+    assert (~fits[edge]).sum() > edge.size // 10 and fits[edge].sum() > edge.size // 10
