@@ -297,3 +297,45 @@ def test_spin_and_births_are_found_in_any_block(where, tiny_blocks):
                     mass=swarm.mass, angular_momentum=spin, birth_frame=births)
     assert spun.has_births == (where is not None)
     assert ws.Simulator(scene, spun, device="cpu", workers=1).spin == (where is not None)
+
+
+def _digest_formula(*arrays):
+    """``blocks.digest`` written out serially: the header and the blocks' SHA-256 in order."""
+    import hashlib
+
+    whole = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        whole.update(f"{a.dtype.str}{a.shape}".encode())
+        rows = a.reshape(a.shape[0], int(np.prod(a.shape[1:]))) if a.ndim else a.reshape(1, 1)
+        for part in blocks.row_blocks(rows.shape[0]):
+            whole.update(hashlib.sha256(rows[part].tobytes()).digest())
+    return whole.digest()
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 63, 64, 65, 130])
+def test_digest_is_its_formula_and_sees_every_change(tiny_blocks, n):
+    """The digest of a few arrays (an (n, 3) float64, an (n,) one, a small (4, 4) one and a
+    0-d one) is its serial formula, bit for bit; flipping any one bit of any value, swapping
+    two rows, reshaping an array and writing -0.0 for 0.0 each change it."""
+    rng = np.random.default_rng(n)
+    arrays = [rng.normal(size=(n, 3)), rng.uniform(size=n), rng.normal(size=(4, 4)),
+              np.array(2.5)]
+    base = blocks.digest(*arrays)
+    assert base == _digest_formula(*arrays) == blocks.digest(*[a.copy() for a in arrays])
+    flips = [(j, i) for j, a in enumerate(arrays) if a.size
+             for i in rng.integers(0, a.size, 3)]
+    for j, i in flips:
+        for bit in rng.integers(0, 64, 4):
+            changed = [a.copy() for a in arrays]
+            flat = changed[j].reshape(-1).view(np.uint64)
+            flat[i] ^= np.uint64(1) << np.uint64(bit)
+            assert blocks.digest(*changed) != base, (j, i, bit)
+    if n >= 2:
+        swapped = [a.copy() for a in arrays]
+        swapped[0][[0, n - 1]] = swapped[0][[n - 1, 0]]
+        assert blocks.digest(*swapped) != base
+    reshaped = [arrays[0], arrays[1], arrays[2].reshape(2, 8), arrays[3]]
+    assert blocks.digest(*reshaped) != base
+    zeros = np.zeros(5)
+    assert blocks.digest(zeros) != blocks.digest(-zeros)

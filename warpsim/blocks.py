@@ -12,6 +12,8 @@ the serial draw would be: :func:`stream_at`).
 
 from __future__ import annotations
 
+import functools
+import hashlib
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -82,3 +84,24 @@ def any_rows(n: int, test: Callable[[slice], np.ndarray]) -> bool:
     """Whether ``test(rows)`` (a boolean array for those rows) holds anywhere, the blocks of
     rows on every core."""
     return any(bool(np.any(hit)) for hit in map_row_blocks(n, test))
+
+
+def digest(*arrays: np.ndarray) -> bytes:
+    """A SHA-256 digest of the arrays: each one's dtype, shape and bytes (C order), its blocks
+    of rows hashed on every core and their digests hashed in order, so that any change of a
+    value, of the order of the rows or of a shape changes it (but for a collision of
+    SHA-256)."""
+    whole = hashlib.sha256()
+    for array in arrays:
+        array = np.ascontiguousarray(array)
+        whole.update(f"{array.dtype.str}{array.shape}".encode())
+        rows = (array.reshape(array.shape[0], int(np.prod(array.shape[1:])))
+                if array.ndim else array.reshape(1, 1))
+        for part in map_row_blocks(rows.shape[0], functools.partial(_block_digest, rows)):
+            whole.update(part)
+    return whole.digest()
+
+
+def _block_digest(rows: np.ndarray, block: slice) -> bytes:
+    """The SHA-256 of the bytes of ``rows[block]`` (C-contiguous rows)."""
+    return hashlib.sha256(rows[block]).digest()

@@ -232,11 +232,14 @@ class Emitter:
                                     [radius for radius, *_ in parts])
         spin = np.asarray(self.angular_momentum, dtype=np.float64)
         still = not spin.any() and not np.signbit(spin).any()  # +0.0 each: the Swarm default
-        return [Swarm(position=position, velocity=velocity, radius=radius, mass=mass,
-                      angular_momentum=None if still else np.tile(spin, (radius.shape[0], 1)),
-                      birth_frame=births)
-                for (radius, mass, velocity, births, _), position
-                in zip(parts, positions, strict=True)]
+        swarms = [Swarm(position=position, velocity=velocity, radius=radius, mass=mass,
+                        angular_momentum=None if still else np.tile(spin, (radius.shape[0], 1)),
+                        birth_frame=births)
+                  for (radius, mass, velocity, births, _), position
+                  in zip(parts, positions, strict=True)]
+        for swarm in swarms:  # placed outside these boxes: a simulator need not check again
+            swarm._mark_clear_of(boxes)
+        return swarms
 
     def _region(self) -> str:
         return f"center {list(self.center)}, half_extents {list(self.half_extents)}"

@@ -201,7 +201,9 @@ class Simulator:
         self.warnings = feasibility.check_run(scene, swarm, self.dt, self.precision,
                                         self.max_bounces)
         """Texts of the :class:`warpsim.PrecisionWarning` s this set-up raised."""
-        feasibility.check_outside(scene.boxes, swarm.position, swarm.radius, self.precision)
+        if not swarm._known_clear_of(scene.boxes):  # an emitter's swarm was placed outside
+            feasibility.check_outside(scene.boxes, swarm.position, swarm.radius,
+                                      self.precision)
         frame = broad.paths(swarm.position, swarm.velocity, swarm.radius, scene.gravity, self.dt,
                             scene.boxes)
         dtype = fp.precision(self.precision).np_dtype

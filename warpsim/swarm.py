@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import validation as check
-from .blocks import any_rows
+from .blocks import any_rows, digest
 
 
 class Swarm:
@@ -46,6 +46,22 @@ class Swarm:
         self.orientation = check.frozen(check.unit_quat_array(
             "orientation", (0.0, 0.0, 0.0, 1.0) if orientation is None else orientation, n))
         self.birth_frame = check.frozen(check.frame_array("birth_frame", birth_frame, n))
+        self._clear_of = None  # a placement's digest: see _known_clear_of
+
+    def _mark_clear_of(self, boxes) -> None:
+        """Record that every sphere was placed outside ``boxes`` (a
+        :class:`warpsim.RoundedBoxes`): its signed distance to each box at least its radius,
+        by the distances ``feasibility.check_outside`` reads (an emitter's placement, or a
+        join of such swarms), so that check could never refuse one."""
+        self._clear_of = _placement_digest(self, boxes)
+
+    def _known_clear_of(self, boxes) -> bool:
+        """Whether :meth:`_mark_clear_of` recorded the spheres and boxes as they are now: the
+        digest of the spheres' centres and radii and of the boxes' arrays
+        (:func:`blocks.digest`), so that any change since (an array replaced, or written
+        after being made writable again; other boxes) is checked again. Equal boxes in
+        another object are the same obstacles."""
+        return self._clear_of is not None and self._clear_of == _placement_digest(self, boxes)
 
     @property
     def has_births(self) -> bool:
@@ -57,3 +73,10 @@ class Swarm:
 
     def __repr__(self) -> str:
         return f"Swarm({len(self)} spheres)"
+
+
+def _placement_digest(swarm: Swarm, boxes) -> bytes:
+    """The digest of what whether a sphere starts inside a box depends on: the spheres'
+    centres and radii, the boxes' centres, half extents, rotations and radii."""
+    return digest(swarm.position, swarm.radius, boxes.center, boxes.half_extents,
+                  boxes.rotation, boxes.radius)

@@ -125,7 +125,8 @@ def spawn_block(scene: Scene, n: int | None, seed: int | None, index: int,
     swarm = scene.spawn(n=size, seed=block_seed(seed, index), dt=dt)
     if not getattr(scene.emitter, "emits_over_time", False):
         return swarm
-    return _with(swarm, birth_frame=scene.emitter.birth_frames(dt, n, index * block, size))
+    return _with(swarm, scene.boxes,
+                 birth_frame=scene.emitter.birth_frames(dt, n, index * block, size))
 
 
 def shard_swarm(scene: Scene, n: int | None, seed: int | None, start: int, stop: int,
@@ -150,9 +151,10 @@ def shard_swarm(scene: Scene, n: int | None, seed: int | None, start: int, stop:
     sizes = [min(block, n - b * block) for b in blocks]
     parts = scene.spawn_many(sizes, [block_seed(seed, b) for b in blocks], dt=dt)
     if getattr(scene.emitter, "emits_over_time", False):
-        parts = [_with(part, birth_frame=scene.emitter.birth_frames(dt, n, b * block, size))
+        parts = [_with(part, scene.boxes,
+                       birth_frame=scene.emitter.birth_frames(dt, n, b * block, size))
                  for part, b, size in zip(parts, blocks, sizes, strict=True)]
-    return _joined(parts)
+    return _joined(parts, scene.boxes)
 
 
 def sharded_spawn(scene: Scene, n: int | None = None, seed: int | None = None,
@@ -183,15 +185,24 @@ SWARM_FIELDS = ("position", "velocity", "radius", "mass", "angular_momentum", "o
                 "birth_frame")
 
 
-def _with(swarm: Swarm, **changes) -> Swarm:
-    return Swarm(**{name: changes.get(name, getattr(swarm, name)) for name in SWARM_FIELDS})
+def _with(swarm: Swarm, boxes, **changes) -> Swarm:
+    """``swarm`` with some fields changed; still known clear of ``boxes`` when it was and
+    neither its positions nor its radii changed."""
+    out = Swarm(**{name: changes.get(name, getattr(swarm, name)) for name in SWARM_FIELDS})
+    if swarm._known_clear_of(boxes) and not {"position", "radius"} & changes.keys():
+        out._mark_clear_of(boxes)
+    return out
 
 
-def _joined(parts: list[Swarm]) -> Swarm:
+def _joined(parts: list[Swarm], boxes) -> Swarm:
+    """The parts one after the other; known clear of ``boxes`` when every part was."""
     if len(parts) == 1:
         return parts[0]
-    return Swarm(**{name: np.concatenate([getattr(p, name) for p in parts])
-                    for name in SWARM_FIELDS})
+    out = Swarm(**{name: np.concatenate([getattr(p, name) for p in parts])
+                   for name in SWARM_FIELDS})
+    if all(part._known_clear_of(boxes) for part in parts):
+        out._mark_clear_of(boxes)
+    return out
 
 
 def plan_shards(n: int, shards: int, block: int = DEFAULT_BLOCK) -> list[tuple[int, int]]:
