@@ -133,6 +133,15 @@ def test_all_born_at_zero_builds_no_births_code():
     ([0, 1], r"birth_frame must be an integer or have shape \(3,\)"),
     (True, "birth_frame must be integers"),
     ([0, 2**31, 0], r"birth_frame\[1\] must be below 2\*\*31"),
+    # beyond int64: reported as the value given, never wrapped to a negative one
+    (np.uint64(2**63 + 5), r"^birth_frame must be below 2\*\*31, got 9223372036854775813$"),
+    (2**64, r"^birth_frame must be below 2\*\*31, got 18446744073709551616$"),
+    (np.array([0, 0, 2**64 - 1], dtype=np.uint64),
+     r"^birth_frame\[2\] must be below 2\*\*31, got 18446744073709551615$"),
+    ([0, 2**70, -1], r"^birth_frame\[2\] must be >= 0, got -1$"),
+    ([0, 2**70, 1], r"^birth_frame\[1\] must be below 2\*\*31, got 1180591620717411303424$"),
+    (-2**70, r"^birth_frame must be >= 0, got -1180591620717411303424$"),
+    ([0, 2**70, 1.5], "birth_frame must be integers"),
 ])
 def test_bad_birth_frames_are_refused_naming_the_index(value, message):
     with pytest.raises(ValueError, match=message):

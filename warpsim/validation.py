@@ -377,23 +377,28 @@ def frame_array(name: str, value, count: int) -> np.ndarray:
     """Frame numbers: an integer broadcast to ``(count,)``, or ``(count,)`` integers, each in
     ``[0, 2**31)``, as int64 (floats, even ``2.0``, and booleans refused)."""
     arr = np.asarray(value)
-    if arr.dtype.kind not in "iu":
+    # integers beyond 64 bits come as Python objects: compared as such, never wrapped
+    wide = arr.dtype == object and all(
+        isinstance(x, (int, np.integer)) and not isinstance(x, (bool, np.bool_))
+        for x in arr.reshape(-1))
+    if arr.dtype.kind not in "iu" and not wide:
         got = _short(value) if arr.ndim == 0 else f"an array of {arr.dtype}"
         raise ValueError(f"{name} must be integers, got {got}")
     one = arr.ndim == 0  # a scalar is checked once, then broadcast
     if one:
-        arr = arr.reshape(1).astype(np.int64)
+        arr = arr.reshape(1)
         label = name
     elif arr.shape == (count,):
-        arr = arr.astype(np.int64)
         label = None
     else:
         raise ValueError(f"{name} must be an integer or have shape ({count},), got {arr.shape}")
+    # the bounds in the values' own type (an unsigned 2**63 or more would wrap in int64)
     for bad, what in ((arr < 0, "must be >= 0"), (arr >= INT_LIMIT, "must be below 2**31")):
         if bad.any():
-            i = first_bad_row(bad)
+            i = first_bad_row(np.asarray(bad, dtype=bool))
             where = label if label is not None else f"{name}[{i}]"
             raise ValueError(f"{where} {what}, got {arr[i]}")
+    arr = arr.astype(np.int64)
     if one:  # zeros: pages the system hands out zeroed, not written here
         return (np.zeros(count, dtype=np.int64) if arr[0] == 0
                 else np.full(count, arr[0], dtype=np.int64))
