@@ -339,3 +339,25 @@ def test_digest_is_its_formula_and_sees_every_change(tiny_blocks, n):
     assert blocks.digest(*reshaped) != base
     zeros = np.zeros(5)
     assert blocks.digest(zeros) != blocks.digest(-zeros)
+
+
+@pytest.mark.parametrize("n", [0, 1, 63, 64, 65, 130])
+@pytest.mark.parametrize("shape", [(), (3,), (4,)])
+def test_copy_and_fill_rows_are_the_whole_array_assignment(tiny_blocks, n, shape):
+    """``copy_rows`` (float64 into float64 and into float32, NumPy's cast) and ``fill_rows``
+    (one row, or one value, for every row) against ``out[:] = ...`` on the whole array; a copy
+    of another number of rows is refused."""
+    rng = np.random.default_rng(n)
+    values = rng.normal(size=(n, *shape)) * 10.0 ** rng.integers(-30, 30, (n, *shape))
+    for dtype in (np.float64, np.float32):
+        whole = np.empty((n, *shape), dtype=dtype)
+        whole[:] = values
+        got = blocks.copy_rows(np.empty((n, *shape), dtype=dtype), values)
+        assert got.dtype == dtype and got.tobytes() == whole.tobytes()
+    row = rng.normal(size=shape)
+    for fill in (row, 2.5):
+        whole = np.empty((n, *shape))
+        whole[:] = fill
+        assert blocks.fill_rows(np.empty((n, *shape)), fill).tobytes() == whole.tobytes()
+    with pytest.raises(ValueError, match="rows"):
+        blocks.copy_rows(np.empty((n + 1, *shape)), values)

@@ -54,6 +54,29 @@ def for_row_blocks(n: int, work: Callable[[slice], object], block: int | None = 
     map_row_blocks(n, work, block)
 
 
+def copy_rows(out: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``out[:] = values`` for ``values`` with ``out``'s rows (cast to ``out``'s type as NumPy
+    casts), in blocks of rows on every core; returns ``out``."""
+    if values.shape[:1] != out.shape[:1]:
+        raise ValueError(f"copy_rows: {values.shape[0]} rows into {out.shape[0]}")
+
+    def copy(rows: slice) -> None:
+        out[rows] = values[rows]
+
+    for_row_blocks(out.shape[0], copy)
+    return out
+
+
+def fill_rows(out: np.ndarray, row) -> np.ndarray:
+    """``out[:] = row``, one row (or value) for every row, in blocks of rows on every core;
+    returns ``out``."""
+    def fill(rows: slice) -> None:
+        out[rows] = row
+
+    for_row_blocks(out.shape[0], fill)
+    return out
+
+
 def stream_at(state: dict, offset: int) -> np.random.Generator:
     """A generator whose next draws are those a generator in ``state`` (its
     ``bit_generator.state``) gives after ``offset`` 64-bit draws: one per float64 of

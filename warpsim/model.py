@@ -25,7 +25,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import warp as wp
 
-from .blocks import for_row_blocks
+from .blocks import copy_rows
 from .broad_phase import Grid, WalkGrid
 from .device import bvh_bounds
 from .kernels.data import model_structs
@@ -118,12 +118,7 @@ def to_device(values: np.ndarray, dtype, p: Precision, device) -> wp.array:
     is the result; for a GPU it is copied over."""
     values = np.asarray(values)
     host = wp.empty(values.shape[0], dtype=dtype, device="cpu")
-    view = host.numpy()
-
-    def fill(rows: slice) -> None:
-        view[rows] = values[rows]
-
-    for_row_blocks(values.shape[0], fill)
+    copy_rows(host.numpy(), values)
     device = wp.get_device(device)
     return host if device.is_cpu else host.to(device)
 

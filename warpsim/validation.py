@@ -31,7 +31,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from .blocks import for_row_blocks
+from .blocks import copy_rows, fill_rows, for_row_blocks
 from .vocabulary import BroadPhase, Motion
 
 PRECISIONS = ("float32", "float64")
@@ -136,13 +136,7 @@ def _as_float_array(name: str, value) -> np.ndarray:
     _refuse_non_numbers(name, value)
     if isinstance(value, np.ndarray) and value.ndim and value.dtype.kind in "iuf":
         # a float64 copy of its own, made in blocks of rows on every core: the same values
-        out = np.empty(value.shape)
-
-        def copy(rows: slice) -> None:
-            out[rows] = value[rows]
-
-        for_row_blocks(value.shape[0], copy)
-        return out
+        return copy_rows(np.empty(value.shape), value)
     try:
         return np.array(value, dtype=np.float64, copy=True)
     except OverflowError:
@@ -296,13 +290,7 @@ def unit_quat_array(name: str, value, count: int) -> np.ndarray:
     arr = _as_float_array(name, value)
     if arr.ndim == 1 and arr.shape == (4,):  # one for all: checked once, as a row, then copied
         row = unit_quat_array(name, arr.reshape(1, 4), 1)[0]
-        out = np.empty((count, 4))
-
-        def fill(rows: slice) -> None:  # blocks of rows on every core
-            out[rows] = row
-
-        for_row_blocks(count, fill)
-        return out
+        return fill_rows(np.empty((count, 4)), row)
     if arr.shape != (count, 4):
         raise ValueError(f"{name} must have shape ({count}, 4) as (x, y, z, w), got {arr.shape}")
     _check_finite_rows(name, arr)
