@@ -179,6 +179,45 @@ def test_auto_takes_the_models_choice_without_grids_where_none_can_win(k, seed, 
     assert (grid is None) == (name in ("brute", "bvh"))
 
 
+@pytest.mark.parametrize("k", [22, 300])
+def test_auto_builds_no_grid_for_a_launch_cheaper_than_building_one(k, monkeypatch):
+    """Given the launch's number of queries, ``auto`` takes the exhaustive method without
+    building a grid exactly when those queries cost at most ``GRID_BUILD`` by the model, and
+    the cost model's choice otherwise (as without a count); ``collide_boxes`` and ``bounce``
+    pass their sphere count, and give the exhaustive method's results bit for bit."""
+    from warpsim import broad_phase as broad
+
+    rng = np.random.default_rng(k)
+    boxes = ws.RoundedBoxes(rng.uniform(-20.0, 20.0, (k, 3)), rng.uniform(0.1, 1.0, (k, 3)),
+                            rotation=random_rotations(rng, k))
+    n = 200
+    position = rng.uniform(-20.0, 20.0, (n, 3))
+    velocity = rng.normal(size=(n, 3))
+    frame = broad.paths(position, velocity, np.full(n, 0.05), (0.0, 0.0, 0.0), DT, boxes)
+    method, cost = broad.exhaustive(k)
+    expected = broad.preferred(broad.estimates(boxes, frame))
+    assert expected != method  # spread boxes, slow spheres: a grid pays per query
+    edge = int(broad.GRID_BUILD // cost)
+    for queries in (None, edge + 1, 10 * edge):
+        assert broad.choose("auto", boxes, frame, queries=queries)[0] == expected
+
+    def refused(*args, **kwargs):
+        raise AssertionError("a grid was built")
+
+    monkeypatch.setattr(broad, "build_grid", refused)
+    monkeypatch.setattr(broad, "build_walk_grid", refused)
+    for queries in (1, n, edge):
+        assert broad.choose("auto", boxes, frame, queries=queries) == (method, None)
+    with pytest.raises(AssertionError, match="a grid was built"):
+        broad.choose("auto", boxes, frame)
+    got = ws.collide_boxes(position, velocity, 0.05, boxes, DT, device="cpu")
+    want = ws.collide_boxes(position, velocity, 0.05, boxes, DT, device="cpu",
+                            broad_phase=method)
+    for field in ("box", "t", "position", "normal", "new_position", "new_velocity"):
+        assert getattr(got, field).tobytes() == getattr(want, field).tobytes(), field
+    ws.bounce(position, velocity, 0.05, boxes, DT, device="cpu")
+
+
 @pytest.mark.parametrize("broad_phase", ["brute", "bvh", "auto"])
 def test_no_boxes(device, broad_phase):
     empty = ws.RoundedBoxes(np.zeros((0, 3)), np.zeros((0, 3)))

@@ -89,6 +89,16 @@ GRID_FIXED = 4.0
 BVH_FIXED = 12.0
 BVH_PER_LEVEL = 3.0
 
+#: What building the grids ``auto`` compares costs on the host, in the cost model's unit: a
+#: launch of fewer queries than this over the exhaustive method's cost per query takes that
+#: method without building them. Measured on the CPU (float32, one frame of the standard room
+#: from its emitter through ``collide_boxes``): the grids build in about 12 ms and a query by
+#: brute force costs about 6 ns a unit, so brute force was faster up to about 250 000 spheres
+#: (0.8 against 13 ms for 10 spheres, 20 against 23 ms for 100 000, 47 against 43 ms for
+#: 300 000); 2e6 units is 83 000 such queries. Larger scenes take longer to grid, so the
+#: threshold errs towards the exhaustive method there too.
+GRID_BUILD = 2.0e6
+
 #: The walk's part of the cost model (same unit): ``WALK_FIXED`` per query (the clip to the grid
 #: and the first cell's faces), then per cell crossed ``WALK_PER_CELL`` (the step) plus its list
 #: (``WALK_PER_ENTRY`` an entry: the first cell's entries are tested, later ones mostly skipped
@@ -531,7 +541,7 @@ def preferred(options: dict) -> str:
 
 
 def choose(requested: str, boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
-           ) -> tuple[str, Grid | WalkGrid | None]:
+           queries: int | None = None) -> tuple[str, Grid | WalkGrid | None]:
     """The broad phase to compile, and its grid when it has one.
 
     Args:
@@ -543,6 +553,10 @@ def choose(requested: str, boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
         boxes: the obstacles.
         frame: what the spheres' first frame needs (see :func:`paths`).
         dtype: the kernels' float type.
+        queries: how many path queries the launch makes, when known (a single frame's
+            ``collide_boxes``); None for a run of frames yet unknown. ``auto`` takes the
+            exhaustive method without building any grid when these queries cost less than
+            the build by the model (``GRID_BUILD``).
 
     Returns:
         ``(name, grid)`` with ``name`` one of ``kernels.data.BROAD_PHASES``.
@@ -562,10 +576,12 @@ def choose(requested: str, boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
         if grid is None:
             return exhaustive(k)[0], None
         name = choice + ("-bvh" if exhaustive(k)[0] == "bvh" else "")
-    elif exhaustive(k)[1] <= GRID_FIXED:
+    elif (exhaustive(k)[1] <= GRID_FIXED
+          or queries is not None and queries * exhaustive(k)[1] <= GRID_BUILD):
         # no grid can win: by the model a margin grid costs at least GRID_FIXED and a walked
         # one at least WALK_FIXED + WALK_PER_CELL, so a scene of a box or two takes its
-        # exhaustive method without building the grids (milliseconds a call for a few spheres)
+        # exhaustive method without building the grids (milliseconds a call for a few
+        # spheres); nor where the launch's every query costs less than building them
         name, grid = exhaustive(k)[0], None
     else:
         options = estimates(boxes, frame, dtype)

@@ -69,8 +69,9 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
         precision: ``"float32"`` or ``"float64"`` kernels.
         broad_phase: how each sphere finds its candidate boxes (see
             :mod:`warpsim.broad_phase`): ``"brute"``, ``"bvh"``, ``"grid"``, ``"walk"`` or
-            ``"auto"``
-            (built per call). The results are bit-identical; only the speed differs.
+            ``"auto"`` (a grid is built per call, and only where the call's spheres are many
+            enough to pay for it: ``broad_phase.GRID_BUILD``). The results are bit-identical;
+            only the speed differs.
         motion: ``"linear"`` or ``"ballistic"``. For the ballistic motion ``t`` is the contact
             time as a fraction of ``dt``, ``position`` the centre on the parabola then,
             ``new_velocity`` the reflected velocity at the contact (``v + g dt`` without one)
@@ -91,7 +92,7 @@ def collide_boxes(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, 
     p = precision_of(precision)
     dev = resolve_device(device)
     method, grid = broad.choose(broad_phase, boxes, broad.paths(pos, vel, rad, g, dt),
-                                p.np_dtype)
+                                p.np_dtype, queries=n)
     model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt, gravity=g)
     spheres = Spheres(radius=to_device(rad, p.scalar, p, dev), mass=None)
     state = {"position": to_device(pos, p.vec3, p, dev),
@@ -213,8 +214,9 @@ def bounce(position, velocity, radius, boxes: RoundedBoxes | RoundedBox, dt: flo
     retention = settings["energy_retention"]
     p = precision_of(precision)
     dev = resolve_device(device)
+    # one query a sphere, and one more a contact (not known before the launch)
     method, grid = broad.choose(broad_phase, boxes, broad.paths(pos, vel, rad, g, dt),
-                                p.np_dtype)
+                                p.np_dtype, queries=n)
     kernel = bounce_kernel(Features(precision=p.name, motion=motion, broad_phase=method,
                                     spin=friction > 0.0, lossy=retention < 1.0))
     model = put_model(boxes, p, dev, broad_phase=method, grid=grid, dt=dt, gravity=g,
