@@ -185,22 +185,32 @@ SWARM_FIELDS = ("position", "velocity", "radius", "mass", "angular_momentum", "o
                 "birth_frame")
 
 
+def _placed(swarm: Swarm) -> bool:
+    """Whether a swarm this module has just drawn with the scene's emitter carries the
+    emitter's mark of a placement outside the scene's boxes (an :class:`warpsim.Emitter`
+    marks its swarms; another emitter's are checked by the simulator). Nothing can have
+    changed it since the draw, so the mark is not hashed again here."""
+    return swarm._clear_of is not None
+
+
 def _with(swarm: Swarm, boxes, **changes) -> Swarm:
-    """``swarm`` with some fields changed; still known clear of ``boxes`` when it was and
-    neither its positions nor its radii changed."""
+    """``swarm``, just drawn for ``boxes``, with some fields changed; marked clear of
+    ``boxes`` when it was placed outside them and neither its positions nor its radii
+    changed."""
     out = Swarm(**{name: changes.get(name, getattr(swarm, name)) for name in SWARM_FIELDS})
-    if swarm._known_clear_of(boxes) and not {"position", "radius"} & changes.keys():
+    if _placed(swarm) and not {"position", "radius"} & changes.keys():
         out._mark_clear_of(boxes)
     return out
 
 
 def _joined(parts: list[Swarm], boxes) -> Swarm:
-    """The parts one after the other; known clear of ``boxes`` when every part was."""
+    """The parts, just drawn for ``boxes``, one after the other; marked clear of ``boxes``
+    when every part was placed outside them."""
     if len(parts) == 1:
         return parts[0]
     out = Swarm(**{name: np.concatenate([getattr(p, name) for p in parts])
                    for name in SWARM_FIELDS})
-    if all(part._known_clear_of(boxes) for part in parts):
+    if all(_placed(part) for part in parts):
         out._mark_clear_of(boxes)
     return out
 
