@@ -1,7 +1,7 @@
 """The frame kernel's cost at this commit against another one, side by side in one run.
 
 Run from the repository root: ``python -m benchmarks.hot_loop [--against REV] [--quick]
-[--repeats R] [--cases float32/linear,...] [--speeds 5,60] [--out PATH]``.
+[--repeats R] [--cases float32/linear,...] [--speeds 5,60] [--broad-phase bvh] [--out PATH]``.
 
 A restructuring of the kernels (issue 16: scene data in structs, one candidate loop) must leave
 both the results and the hot loop's cost as they were. For each of float32/float64 and the
@@ -20,7 +20,9 @@ SHA-256 of the state's bytes). ``--scene grown-K`` advances ``benchmarks.speed``
 of ``K`` boxes (the generator of this checkout, for both sides). With ``--speeds``, each case
 runs once per speed, the swarm drawn from the scene's emitter with its speed replaced (every
 direction), and each side's cost at the last speed against the first is printed (issue 20: 60
-m/s against 5 m/s over a whole run).
+m/s against 5 m/s over a whole run). ``--broad-phase`` forces both sides' broad phase (the
+default ``auto`` picks the grid in the standard room, so a change to the BVH's loop needs
+``--broad-phase bvh``, or a grown room whose paths leave the grid's cells).
 """
 
 from __future__ import annotations
@@ -64,7 +66,8 @@ else:
     swarm = scene.spawn(n=n, seed=20240601)
 best = float("inf")
 for _ in range(timings):
-    sim = ws.Simulator(scene, swarm, precision=prec, motion=motion, workers=1, device="cpu")
+    sim = ws.Simulator(scene, swarm, precision=prec, motion=motion, workers=1, device="cpu",
+                       broad_phase=sys.argv[9])
     sim.build()
     sim.step(1)
     wp.synchronize_device("cpu")
@@ -95,15 +98,16 @@ def export_tree(rev: str, root: Path) -> Path:
 
 
 def measure(site: Path | None, prec: str, motion: str, n: int, frames: int,
-            timings: int, scene: str = "room", speed: float | None = None) -> dict:
+            timings: int, scene: str = "room", speed: float | None = None,
+            broad_phase: str = "auto") -> dict:
     """One process's best time; ``site`` None is this checkout's installed package; ``speed``
-    [m/s] replaces the emitter's (None: the scene's swarm)."""
+    [m/s] replaces the emitter's (None: the scene's swarm); ``broad_phase`` the simulator's."""
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = str(site)
     out = subprocess.run([sys.executable, "-c", CHILD, prec, motion, str(n), str(frames),
                           str(timings), scene, "" if speed is None else repr(float(speed)),
-                          str(Path(__file__).resolve().parent.parent)],
+                          str(Path(__file__).resolve().parent.parent), broad_phase],
                          check=True, capture_output=True, text=True,
                          env=env, cwd=tempfile.gettempdir())
     result = json.loads(out.stdout.strip().splitlines()[-1])
@@ -125,6 +129,8 @@ def main(argv=None) -> None:
                    help="comma-separated emitter speeds [m/s] replacing the scene's, each a row "
                         "(default: the scene's own swarm); with two, each side's cost at the "
                         "last against the first is printed too")
+    p.add_argument("--broad-phase", default="auto",
+                   help="the simulators' broad_phase (default auto; bvh, brute, grid, walk)")
     args = p.parse_args(argv)
     cases = CASES if args.cases is None else [tuple(c.split("/")) for c in args.cases.split(",")]
     speeds = [None] if args.speeds is None else [float(s) for s in args.speeds.split(",")]
@@ -143,7 +149,8 @@ def main(argv=None) -> None:
             hashes = {}
             for _ in range(repeats):
                 for side, where in (("base", site), ("this", None)):
-                    r = measure(where, prec, motion, n, frames, 3, args.scene, speed)
+                    r = measure(where, prec, motion, n, frames, 3, args.scene, speed,
+                                args.broad_phase)
                     best[side] = min(best[side], r["seconds"])
                     hashes[side] = r["hash"]
             ns = {k: v / (n * frames) * 1e9 for k, v in best.items()}
@@ -172,7 +179,8 @@ def main(argv=None) -> None:
                 speed_ratios[key] = last[f"{side}_ns"] / first[f"{side}_ns"]
                 print(f"{prec} {motion}, {rev if side == 'base' else 'this'}: "
                       f"{speeds[-1]:g} m/s costs {speed_ratios[key]:.2f}x {speeds[0]:g} m/s")
-    finish(out, {"machine": info, "against": rev, "scene": args.scene, "spheres": n,
+    finish(out, {"machine": info, "against": rev, "scene": args.scene,
+                 "broad_phase": args.broad_phase, "spheres": n,
                  "frames": frames, "repeats": repeats, "rows": rows,
                  "speed_ratios": speed_ratios}, started)
 

@@ -48,6 +48,10 @@ WALK_PARALLEL = 1.0e-30
 #: (a few ulps each), so no rounding can hide a box a contact is found on.
 WALK_PAD_ULPS = 64.0
 
+#: Boxes of a BVH query gathered before any is tried (``candidate_funcs``' ``nearest_bvh``);
+#: a query returning more runs again, trying each box as it comes.
+BVH_BATCH = 16
+
 #: Absolute pad [m] on the BVH queries, for coordinates at or near zero, where the relative pad
 #: vanishes (above float32's smallest subnormal, so the outward rounding still holds).
 BOUNDS_PAD_ABS = 1.0e-30
@@ -317,6 +321,10 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
     FLAG_BITS = WALK_FLAG_BITS
     SLACK = scalar(1.0 + REJECT_SLACK)
     PAD_ULPS = scalar(WALK_PAD_ULPS * p.eps)
+    BvhBatch = wp.types.vector(BVH_BATCH, wp.int32)
+    # nearest_bvh gathers a query's boxes first in float32 where the BVH is the method; as a
+    # fallback (grid-bvh, walk-bvh) the gathering's code made the grid's frame 1.8x slower
+    batched = p.name == "float32" and broad_phase == "bvh"
 
     @wp.func(inline=True)
     def candidate(q: Path, boxes: Boxes, k: int, best: int, best_t: scalar, best_n: vec3):
@@ -362,7 +370,16 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
     @wp.func(inline=True)
     def nearest_bvh(q: Path, boxes: Boxes, broad: BroadPhase):
         """The first contact over the boxes a query of the BVH returns (``broad.bvh = 0``, no
-        boxes: nothing is hit)."""
+        boxes: nothing is hit).
+
+        With the BVH as the broad phase (``"bvh"``) in float32, the query's boxes are
+        gathered first (up to ``BVH_BATCH``) and tried after the traversal, in the order it
+        returned them; a query returning more is run a second time, each box tried as it
+        comes. Trying each box inside the traversal's loop cost 1.25x that frame with 256
+        boxes; in float64 the gathering cost 1.10x, and as the grid's fallback
+        (``"grid-bvh"``) it made the grid's own frame 1.8x slower, so there each box is tried
+        as it comes (BENCHMARKS.md, "The BVH's query: its boxes gathered first"). The boxes,
+        their order and so the bits are the same either way."""
         best = int(-1)
         best_t = q.tau
         best_n = vec3(ZERO, ZERO, ZERO)
@@ -370,8 +387,24 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
             lower, upper = bvh_box(q)
             query = wp.bvh_query_aabb(broad.bvh, lower, upper)
             k = int(0)
-            while wp.bvh_query_next(query, k):
-                best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
+            if wp.static(batched):
+                found = BvhBatch()
+                count = int(0)
+                while wp.bvh_query_next(query, k):
+                    if count < BVH_BATCH:
+                        found[count] = k
+                    count += 1
+                if count <= BVH_BATCH:
+                    for j in range(count):
+                        best, best_t, best_n = candidate(q, boxes, found[j], best, best_t,
+                                                         best_n)
+                else:  # more than a batch: the same boxes in the same order, as they come
+                    query = wp.bvh_query_aabb(broad.bvh, lower, upper)
+                    while wp.bvh_query_next(query, k):
+                        best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
+            else:
+                while wp.bvh_query_next(query, k):
+                    best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
         return best, best_t, best_n
 
     @wp.func(inline=True)

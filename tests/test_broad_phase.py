@@ -258,3 +258,59 @@ def test_bvh_bounds_hold_the_reject_bounds(scale):
         reach = e.astype(np.float64) * (1.0 + REJECT_SLACK)
         assert (lower.astype(np.float64) < c.astype(np.float64) - reach).all()
         assert (upper.astype(np.float64) > c.astype(np.float64) + reach).all()
+
+
+def query_box_counts(boxes: ws.RoundedBoxes, pos, vel, rad, dt: float) -> np.ndarray:
+    """How many boxes' BVH bounds a straight path's query box overlaps (float64, the query
+    box of ``candidates.bvh_box`` without its rounding pad): what one query returns."""
+    lower, upper = bvh_bounds(boxes.center, boxes.world_extent())
+    end = pos + vel * dt
+    grow = (rad * (1.0 + REJECT_SLACK))[:, None]
+    lo, hi = np.minimum(pos, end) - grow, np.maximum(pos, end) + grow
+    overlap = ((lo[:, None, :] <= upper[None]) & (hi[:, None, :] >= lower[None])).all(axis=2)
+    return overlap.sum(axis=1)
+
+
+@pytest.mark.parametrize("motion", ["linear", "ballistic"])
+def test_bvh_queries_beyond_one_batch_are_bit_identical(device, motion):
+    """A BVH query's boxes are gathered in batches of ``BVH_BATCH`` before they are tried; a
+    query returning more runs again. Paths through a dense cluster of small boxes return
+    fewer, exactly as many and more boxes than a batch: every one keeps brute force's
+    contact, bit for bit, ties included (duplicated boxes)."""
+    from warpsim.kernels.candidates import BVH_BATCH
+
+    rng = np.random.default_rng(11)
+    k = 240
+    center = rng.uniform(-0.6, 0.6, size=(k, 3))
+    half = rng.uniform(0.01, 0.06, size=(k, 3))
+    half[::3, 1] = 0.0  # sharp plates among them
+    radius = np.where(np.arange(k) % 2 == 0, 0.0, 0.02)
+    base = ws.RoundedBoxes(center, half, random_rotations(rng, k), radius)
+    original = rng.choice(k, size=20, replace=False)
+    boxes = ws.RoundedBoxes.concatenate([base, ws.RoundedBoxes(
+        center[original], half[original], base.rotation[original], radius[original])])
+    n = 4000
+    pos = rng.uniform(-1.0, 1.0, size=(n, 3))
+    direction = rng.normal(size=(n, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    vel = direction * rng.uniform(1.0, 120.0, size=(n, 1))  # paths of 1.7 cm to 2 m
+    rad = rng.uniform(0.0, 0.03, size=n)
+    counts = query_box_counts(boxes, pos, vel, rad, DT)
+    assert (counts == BVH_BATCH).sum() >= 5
+    assert ((counts > 0) & (counts < BVH_BATCH)).sum() >= 200
+    assert (counts > BVH_BATCH).sum() >= 200
+    gravity = (0.0, -9.81, 0.0) if motion == "ballistic" else None
+    brute = ws.collide_boxes(pos, vel, rad, boxes, DT, device=device, broad_phase="brute",
+                             motion=motion, gravity=gravity)
+    bvh = ws.collide_boxes(pos, vel, rad, boxes, DT, device=device, broad_phase="bvh",
+                           motion=motion, gravity=gravity)
+    assert_same(brute, bvh, CONTACT_FIELDS)
+    for few in (counts < BVH_BATCH, counts > BVH_BATCH):  # contacts on both sides of a batch
+        assert brute.hit[few].sum() >= 100
+    assert not np.isin(bvh.box, k + np.arange(len(original))).any()  # ties: the lower index
+    if motion == "linear":
+        bounced = ws.bounce(pos, vel, rad, boxes, DT, device=device, broad_phase="bvh")
+        exhaustive = ws.bounce(pos, vel, rad, boxes, DT, device=device, broad_phase="brute")
+        assert_same(exhaustive, bounced, ("hit", "bounces", "capped", "position",
+                                          "velocity", "angular_momentum"))
+        assert exhaustive.bounces.max() >= 2
