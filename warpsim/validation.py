@@ -364,6 +364,11 @@ def index_list(name: str, value: Sequence[int] | np.ndarray, count: int) -> np.n
 def frame_array(name: str, value, count: int) -> np.ndarray:
     """Frame numbers: an integer broadcast to ``(count,)``, or ``(count,)`` integers, each in
     ``[0, 2**31)``, as int64 (floats, even ``2.0``, and booleans refused)."""
+    if isinstance(value, (list, tuple)):
+        # NumPy turns a bool among integers into 0 or 1: refused, as a bool alone is
+        for i, x in enumerate(value):
+            if isinstance(x, (bool, np.bool_)):
+                raise ValueError(f"{name}[{i}] must be an integer, got {x!r}")
     arr = np.asarray(value)
     # integers beyond 64 bits come as Python objects: compared as such, never wrapped
     wide = arr.dtype == object and all(
