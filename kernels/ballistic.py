@@ -616,7 +616,8 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                     contact = arc_contact_centre(a, v, g, s, n, boxes.radius[box] + r,
                                                  boxes.extent[box])
                     rest = wp.max(rest - s, ZERO)
-                    L = on_contact.spin(L, u, n, r, m, physics)
+                    if wp.static(features.spin):  # else L is not the loop's
+                        L = on_contact.spin(L, u, n, r, m, physics)
                     v = u - TWO * un * n
                     if wp.static(features.lossy):
                         energy = on_contact.loss(energy, m, contact, physics)

@@ -141,7 +141,13 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
         bounces = int(0)
         capped = int(0)
         supported = int(0)
-        support = vec3(ZERO, ZERO, ZERO)  # normal of the last resting contact
+        # the normal of the last resting contact, as three scalars: every vec3 the loop carries
+        # is merged at its branches, and in float64 one vec3 more (this one, or ``L`` without
+        # spin) made clang keep them all in memory, the frame 1.8x slower (BENCHMARKS.md,
+        # "float64: the bounce loop's state in registers again")
+        s0 = ZERO
+        s1 = ZERO
+        s2 = ZERO
         done = int(0)
         travelled = ZERO  # fraction of the frame's path behind the sphere
         left = int(-1)  # the box the rest of the path leaves (it cannot meet it again)
@@ -156,7 +162,8 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
             else:
                 bounces += 1
                 contact = contact_centre(a, t, d, n, boxes.radius[box] + r, boxes.extent[box])
-                L = on_contact.spin(L, w, n, r, m, physics)
+                if wp.static(features.spin):  # else L is not the loop's (see s0)
+                    L = on_contact.spin(L, w, n, r, m, physics)
                 vn = wp.dot(w, n)
                 dn = wp.dot(d, n)
                 resting = -vn <= REST * wp.max(-wp.dot(g, n), ZERO) * dt
@@ -174,7 +181,9 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
                                      wp.max(speed, ZERO), events)
                 if resting:
                     supported += 1
-                    support = n
+                    s0 = n[0]
+                    s1 = n[1]
+                    s2 = n[2]
                     w = w - vn * n
                     d = (ONE - t) * (d - dn * n)
                 else:
@@ -197,6 +206,7 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
         # the surface (the sphere ends on it, its normal velocity 0, as at the frame's start)
         v = w + half_kick
         if supported > 0:
+            support = vec3(s0, s1, s2)
             into = wp.dot(v, support)
             if into < ZERO:
                 v = v - into * support
