@@ -142,12 +142,15 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
         capped = int(0)
         supported = int(0)
         # the normal of the last resting contact, as three scalars: every vec3 the loop carries
-        # is merged at its branches, and in float64 one vec3 more (this one, or ``L`` without
-        # spin) made clang keep them all in memory, the frame 1.8x slower (BENCHMARKS.md,
-        # "float64: the bounce loop's state in registers again")
+        # is merged at its branches, and in float64 one vec3 more (this one, or ``L``) made
+        # clang keep them all in memory, the frame 1.8x slower (BENCHMARKS.md, "float64: the
+        # bounce loop's state in registers again")
         s0 = ZERO
         s1 = ZERO
         s2 = ZERO
+        l0 = L[0]  # the angular momentum, as scalars too
+        l1 = L[1]
+        l2 = L[2]
         done = int(0)
         travelled = ZERO  # fraction of the frame's path behind the sphere
         left = int(-1)  # the box the rest of the path leaves (it cannot meet it again)
@@ -163,7 +166,10 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
                 bounces += 1
                 contact = contact_centre(a, t, d, n, boxes.radius[box] + r, boxes.extent[box])
                 if wp.static(features.spin):  # else L is not the loop's (see s0)
-                    L = on_contact.spin(L, w, n, r, m, physics)
+                    spun = on_contact.spin(vec3(l0, l1, l2), w, n, r, m, physics)
+                    l0 = spun[0]
+                    l1 = spun[1]
+                    l2 = spun[2]
                 vn = wp.dot(w, n)
                 dn = wp.dot(d, n)
                 resting = -vn <= REST * wp.max(-wp.dot(g, n), ZERO) * dt
@@ -205,6 +211,8 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
         # the velocity at the frame's end: the second half kick; a support takes its part into
         # the surface (the sphere ends on it, its normal velocity 0, as at the frame's start)
         v = w + half_kick
+        if wp.static(features.spin):
+            L = vec3(l0, l1, l2)
         if supported > 0:
             support = vec3(s0, s1, s2)
             into = wp.dot(v, support)
