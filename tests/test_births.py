@@ -143,8 +143,8 @@ def test_all_born_at_zero_builds_no_births_code():
     (-2**70, r"^birth_frame must be >= 0, got -1180591620717411303424$"),
     ([0, 2**70, 1.5], "birth_frame must be integers"),
     # a bool among integers would become 0 or 1: refused as a bool alone is
-    ([0, True, 2], r"^birth_frame\[1\] must be an integer, got True$"),
-    ((np.bool_(False), 1, 2), r"^birth_frame\[0\] must be an integer, got np.False_$"),
+    ([0, True, 2], r"^birth_frame\[1\] must be a number, got True$"),
+    ((np.bool_(False), 1, 2), r"^birth_frame\[0\] must be a number, got np.False_$"),
 ])
 def test_bad_birth_frames_are_refused_naming_the_index(value, message):
     with pytest.raises(ValueError, match=message):

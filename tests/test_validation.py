@@ -166,6 +166,11 @@ def test_index_list_refuses_floats_and_bools():
             "frames must be integer indices, got an array of float64")
     _raises(lambda: check.index_list("frames", [True], 3),
             "frames must be integer indices, got an array of bool")
+    # among integers NumPy would make a bool 1: refused too, naming it
+    _raises(lambda: check.index_list("frames", [0, True], 3),
+            "frames[1] must be a number, got True")
+    _raises(lambda: check.index_list("frames", (np.True_, 2), 3),
+            "frames[0] must be a number, got np.True_")
     _raises(lambda: check.index_list("frames", [0, 3], 3), "frames[1] = 3 is out of range [0, 3)")
 
 

@@ -346,11 +346,19 @@ def flag(name: str, value) -> bool:
     return bool(value)
 
 
+def _refuse_bools_among_integers(name: str, value) -> None:
+    """A list NumPy made integers of may have held booleans (``[0, True]`` becomes ``[0,
+    1]``): refused, naming the index (:func:`_refuse_non_numbers`), as a boolean alone is."""
+    if isinstance(value, (list, tuple)):
+        _refuse_non_numbers(name, value)
+
+
 def index_list(name: str, value: Sequence[int] | np.ndarray, count: int) -> np.ndarray:
     """Distinct integer indices into ``range(count)``, as int64 (floats and bools refused)."""
     arr = np.asarray(value)
     if arr.size and (arr.dtype.kind not in "iu"):
         raise ValueError(f"{name} must be integer indices, got an array of {arr.dtype}")
+    _refuse_bools_among_integers(name, value)
     arr = np.array(arr, dtype=np.int64, copy=True).reshape(-1)
     bad = (arr < 0) | (arr >= count)
     if bad.any():
@@ -364,11 +372,6 @@ def index_list(name: str, value: Sequence[int] | np.ndarray, count: int) -> np.n
 def frame_array(name: str, value, count: int) -> np.ndarray:
     """Frame numbers: an integer broadcast to ``(count,)``, or ``(count,)`` integers, each in
     ``[0, 2**31)``, as int64 (floats, even ``2.0``, and booleans refused)."""
-    if isinstance(value, (list, tuple)):
-        # NumPy turns a bool among integers into 0 or 1: refused, as a bool alone is
-        for i, x in enumerate(value):
-            if isinstance(x, (bool, np.bool_)):
-                raise ValueError(f"{name}[{i}] must be an integer, got {x!r}")
     arr = np.asarray(value)
     # integers beyond 64 bits come as Python objects: compared as such, never wrapped
     wide = arr.dtype == object and all(
@@ -377,6 +380,7 @@ def frame_array(name: str, value, count: int) -> np.ndarray:
     if arr.dtype.kind not in "iu" and not wide:
         got = _short(value) if arr.ndim == 0 else f"an array of {arr.dtype}"
         raise ValueError(f"{name} must be integers, got {got}")
+    _refuse_bools_among_integers(name, value)
     one = arr.ndim == 0  # a scalar is checked once, then broadcast
     if one:
         arr = arr.reshape(1)
