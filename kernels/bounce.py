@@ -148,9 +148,10 @@ def bounce_funcs(features: Features) -> SimpleNamespace:
         s0 = ZERO
         s1 = ZERO
         s2 = ZERO
-        l0 = L[0]  # the angular momentum, as scalars too
-        l1 = L[1]
-        l2 = L[2]
+        if wp.static(features.spin):  # the angular momentum, as scalars too
+            l0 = L[0]
+            l1 = L[1]
+            l2 = L[2]
         done = int(0)
         travelled = ZERO  # fraction of the frame's path behind the sphere
         left = int(-1)  # the box the rest of the path leaves (it cannot meet it again)

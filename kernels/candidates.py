@@ -387,6 +387,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
             lower, upper = bvh_box(q)
             query = wp.bvh_query_aabb(broad.bvh, lower, upper)
             k = int(0)
+            count = int(BVH_BATCH + 1)  # not gathered: each box tried as it comes
             if wp.static(batched):
                 found = BvhBatch()
                 count = int(0)
@@ -400,9 +401,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
                                                          best_n)
                 else:  # more than a batch: the same boxes in the same order, as they come
                     query = wp.bvh_query_aabb(broad.bvh, lower, upper)
-                    while wp.bvh_query_next(query, k):
-                        best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
-            else:
+            if count > BVH_BATCH:
                 while wp.bvh_query_next(query, k):
                     best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
         return best, best_t, best_n
