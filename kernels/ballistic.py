@@ -593,41 +593,67 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         supported = int(0)
         done = int(0)
         left = int(-1)  # the box the rest of the frame's arc leaves (it cannot meet it again)
+        # the centre, velocity and angular momentum the loop carries, as three scalars each
+        # (p, w and M in a pass): merged at the loop's branches as vec3s, float64 kept them in
+        # stack slots, as it had the linear loop's (bounce.py; BENCHMARKS.md, "float64: the
+        # ballistic loop's state in registers too")
+        a0 = a[0]
+        a1 = a[1]
+        a2 = a[2]
+        v0 = v[0]
+        v1 = v[1]
+        v2 = v[2]
+        l0 = L[0]
+        l1 = L[1]
+        l2 = L[2]
         while done == 0:
-            box, s, n = nearest_free_leg(a, v, g, rest, r, left, boxes, broad)
+            p = vec3(a0, a1, a2)
+            w = vec3(v0, v1, v2)
+            M = vec3(l0, l1, l2)
+            box, s, n = nearest_free_leg(p, w, g, rest, r, left, boxes, broad)
             if box < 0:
-                a = arc_point(a, v, g, rest)
-                v = v + rest * g
+                p = arc_point(p, w, g, rest)
+                w = w + rest * g
                 done = 1
             elif bounces >= max_bounces:
                 capped = 1  # time left and a contact ahead: stay at the last contact
                 done = 1
             else:
-                u = v + s * g
+                u = w + s * g
                 un = wp.dot(u, n)
-                if resting(g, n, un, a, arc_point(a, v, g, s) - a, boxes.radius[box] + r,
+                if resting(g, n, un, p, arc_point(p, w, g, s) - p, boxes.radius[box] + r,
                            boxes.extent[box]) == 1:
-                    a, v, L, energy, bounces, capped, supported = held_rest(
-                        a, v, L, energy, rest, bounces, capped, supported, r, m, physics,
+                    p, w, M, energy, bounces, capped, supported = held_rest(
+                        p, w, M, energy, rest, bounces, capped, supported, r, m, physics,
                         boxes, broad, frame, sphere, events, box, s, n)
                     done = 1
                 else:  # a bounce
                     bounces += 1
-                    contact = arc_contact_centre(a, v, g, s, n, boxes.radius[box] + r,
+                    contact = arc_contact_centre(p, w, g, s, n, boxes.radius[box] + r,
                                                  boxes.extent[box])
                     rest = wp.max(rest - s, ZERO)
-                    if wp.static(features.spin):  # else L is not the loop's
-                        L = on_contact.spin(L, u, n, r, m, physics)
-                    v = u - TWO * un * n
+                    if wp.static(features.spin):
+                        M = on_contact.spin(M, u, n, r, m, physics)
+                    w = u - TWO * un * n
                     if wp.static(features.lossy):
                         energy = on_contact.loss(energy, m, contact, physics)
-                        v = v * on_contact.keep(physics)
+                        w = w * on_contact.keep(physics)
                     on_contact.event(frame, sphere, box, 0, contact, n, (dt - rest) / dt, -un,
                                      events)
-                    a = contact
+                    p = contact
                     left = int(-1)
-                    if leaves_for_the_frame(v, g, n, rest) == 1:
+                    if leaves_for_the_frame(w, g, n, rest) == 1:
                         left = box
-        return a, v, L, energy, bounces, capped, supported
+            a0 = p[0]
+            a1 = p[1]
+            a2 = p[2]
+            v0 = w[0]
+            v1 = w[1]
+            v2 = w[2]
+            l0 = M[0]
+            l1 = M[1]
+            l2 = M[2]
+        return (vec3(a0, a1, a2), vec3(v0, v1, v2), vec3(l0, l1, l2), energy, bounces, capped,
+                supported)
 
     return SimpleNamespace(ballistic_path=ballistic_path)
