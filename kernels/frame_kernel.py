@@ -544,9 +544,12 @@ def frame_kernel(features: Features):
                                            record_angular_velocity_out)
                         free = after
                 else:
-                    x, v, L, o, energy, bounces, supports, capped = counted_frame(
+                    x, v, L_new, o_new, energy, bounces, supports, capped = counted_frame(
                         live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1, sphere,
                         events_out, bounces, supports, capped)
+                    if wp.static(spin):  # else L and o are not the loop's
+                        L = L_new
+                        o = o_new
                     row = record_frame(f, frame_count, record_every, row, i, with_motion, x, v,
                                        L, o, r, m, physics, orientation_in, record_position_out,
                                        record_orientation_out, record_velocity_out,
@@ -559,9 +562,12 @@ def frame_kernel(features: Features):
                 if wp.static(births):
                     if f < born:
                         live = 0
-                x, v, L, o, energy, bounces, supports, capped = counted_frame(
+                x, v, L_new, o_new, energy, bounces, supports, capped = counted_frame(
                     live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1, sphere,
                     events_out, bounces, supports, capped)
+                if wp.static(spin):  # else L and o are not the loop's
+                    L = L_new
+                    o = o_new
                 row = record_frame(f, frame_count, record_every, row, i, with_motion, x, v, L,
                                    o, r, m, physics, orientation_in, record_position_out,
                                    record_orientation_out, record_velocity_out,
