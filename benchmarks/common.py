@@ -134,7 +134,8 @@ def start(name: str, args: argparse.Namespace):
     init_warp(debug=False)  # without Warp's start-up lines
     device = resolve_device(args.device)
     info = machine(device)
-    print(f"# {name}{' (quick)' if args.quick else ''}\n\n{info['cpu']}, {info['cores']} cores, "
+    print(f"# {name}{' (quick)' if args.quick else ''}\n\n{info['cpu']} ({info['cpu_id']}), "
+          f"{info['cores']} cores, "
           f"{info['platform']}, Python {info['python']}, NumPy {info['numpy']}, "
           f"Warp {info['warp']}, warpsim {ws.__version__}, device {info['device']} "
           f"({info['device_name']})")

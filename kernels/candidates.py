@@ -242,11 +242,13 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
             fits = 0
         return fits, index
 
-    # The fit test the loops use, the same verdicts and cells either way: in float32 the
-    # branch-free form took 0.95x the frame at 5 m/s and 0.96 to 0.98x at 60 m/s in the
-    # standard room, linear and ballistic alike; in float64 it measured no gain (1.00 and
-    # 1.02x) (BENCHMARKS.md, "Fast spheres: a grid lookup without branches").
-    grid_fits_path = grid_fits_branch_free if p.name == "float32" else grid_fits_per_axis
+    # The fit test the loops use, the same verdicts and cells either way: the test per axis,
+    # in both precisions. The branch-free form took 0.95 to 0.98x the float32 frame on the
+    # CPU it was written on, and 1.3 to 1.4x on another (AMD family 23, where clang's
+    # two-lane vector form of it is slow); so it is kept, tested equal, but not compiled in
+    # (BENCHMARKS.md, "Fast spheres: a grid lookup without branches" and "The grid lookup:
+    # the branch-free form on another CPU").
+    grid_fits_path = grid_fits_per_axis
 
     @wp.func(inline=True)
     def grid_fits(q: Path, broad: BroadPhase):

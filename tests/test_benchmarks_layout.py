@@ -55,5 +55,5 @@ def test_git_commit_of_a_repository_and_of_a_plain_folder(tmp_path):
 
 def test_machine_records_versions_and_commit():
     info = machine()
-    assert {"platform", "cpu", "cores", "python", "numpy", "warp", "warpsim", "commit",
-            "dirty"} <= set(info)
+    assert {"platform", "cpu", "cpu_id", "cores", "python", "numpy", "warp", "warpsim",
+            "commit", "dirty"} <= set(info)

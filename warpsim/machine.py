@@ -24,6 +24,28 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
+def cpu_id() -> str | None:
+    """The CPU's vendor, family, model and stepping from ``/proc/cpuinfo`` (``"AuthenticAMD
+    family 23 model 1 stepping 2"``), None where there is none. Two machines with the same
+    model name can be different generations, and the kernels' costs differ between them (a
+    code form faster on one measured 1.4x slower on another: BENCHMARKS.md, "The grid lookup:
+    the branch-free form on another CPU")."""
+    fields = {}
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if not line.strip():
+                    break  # the first processor's block
+                key, _, value = line.partition(":")
+                fields[key.strip()] = value.strip()
+    except OSError:
+        return None
+    if "cpu family" not in fields:
+        return None
+    return (f"{fields.get('vendor_id', '?')} family {fields['cpu family']} "
+            f"model {fields.get('model', '?')} stepping {fields.get('stepping', '?')}")
+
+
 def git_commit(folder: Path = SOURCE) -> dict:
     """``{"commit": hex or None, "dirty": bool or None}`` of the git checkout holding
     ``folder`` (None where it is not one, or git is missing); ``dirty``: tracked files differ
@@ -44,15 +66,16 @@ def git_commit(folder: Path = SOURCE) -> dict:
 
 
 def machine(device=None) -> dict:
-    """Platform, CPU model, core count, the versions (Python, NumPy, Warp, warpsim), the git
-    commit of the source (with ``dirty``), and the Warp device when given (a Warp device, or
-    None for none)."""
+    """Platform, CPU model (and its family, model and stepping, ``cpu_id``), core count, the
+    versions (Python, NumPy, Warp, warpsim), the git commit of the source (with ``dirty``),
+    and the Warp device when given (a Warp device, or None for none)."""
     import numpy as np
     import warp as wp
 
     from . import __version__
 
-    info = {"platform": platform.platform(), "cpu": cpu_model(), "cores": os.cpu_count(),
+    info = {"platform": platform.platform(), "cpu": cpu_model(),
+            "cpu_id": cpu_id(), "cores": os.cpu_count(),
             "python": platform.python_version(), "numpy": np.__version__,
             "warp": wp.__version__, "warpsim": __version__, **git_commit()}
     if device is not None:
@@ -60,4 +83,4 @@ def machine(device=None) -> dict:
     return info
 
 
-__all__ = ["cpu_model", "git_commit", "machine"]
+__all__ = ["cpu_id", "cpu_model", "git_commit", "machine"]
