@@ -17,7 +17,9 @@ time a shared machine's other work holds the core is not counted; contention for
 is, hence the best of many turns. The table gives the best ns per
 sphere-frame of each side, their ratio, and whether the final states are bit-identical (a
 SHA-256 of the state's bytes). ``--scene grown-K`` advances ``benchmarks.speed``'s grown room
-of ``K`` boxes (the generator of this checkout, for both sides). With ``--speeds``, each case
+of ``K`` boxes: built with its swarm by this checkout and saved as arrays, which every side
+loads, so a revision older than the generator or the benchmarks' helpers (``--against
+ed0e912``, 1 December) runs the same spheres among the same boxes. With ``--speeds``, each case
 runs once per speed, the swarm drawn from the scene's emitter with its speed replaced (every
 direction), and each side's cost at the last speed against the first is printed (issue 20: 60
 m/s against 5 m/s over a whole run). ``--broad-phase`` forces both sides' broad phase (the
@@ -27,6 +29,7 @@ default ``auto`` picks the grid in the standard room, so a change to the BVH's l
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -35,6 +38,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 from .common import finish, parser, print_table, start
 
@@ -52,18 +57,18 @@ import warp as wp
 wp.config.quiet = True
 import warpsim as ws
 prec, motion, n, frames, timings = sys.argv[1], sys.argv[2], *map(int, sys.argv[3:6])
-if sys.argv[6].startswith("grown-"):  # benchmarks.speed's grown room of K boxes
-    sys.path.insert(0, sys.argv[8])
-    from benchmarks.speed import SEED, grown_room
-    k = int(sys.argv[6].removeprefix("grown-"))
-    scene = grown_room(k, n, np.random.default_rng([SEED, k]))
+if sys.argv[6].endswith(".npz"):  # a grown room and its swarm, saved by the parent as arrays
+    d = np.load(sys.argv[6])
+    scene = ws.Scene(ws.RoundedBoxes(d["center"], d["half_extents"], d["rotation"],
+                                     d["box_radius"]))
+    swarm = ws.Swarm(d["position"], d["velocity"], d["radius"], d["mass"])
 else:
     scene = ws.Scene.load(sys.argv[6])
-if sys.argv[7]:  # the emitter's speed replaced (every direction, as the standard room's)
-    emitter = dataclasses.replace(scene.emitter, count=n, speed=float(sys.argv[7]))
-    swarm = emitter.spawn(scene.boxes, seed=20240601)
-else:
-    swarm = scene.spawn(n=n, seed=20240601)
+    if sys.argv[7]:  # the emitter's speed replaced (every direction, as the standard room's)
+        emitter = dataclasses.replace(scene.emitter, count=n, speed=float(sys.argv[7]))
+        swarm = emitter.spawn(scene.boxes, seed=20240601)
+    else:
+        swarm = scene.spawn(n=n, seed=20240601)
 best = float("inf")
 for _ in range(timings):
     sim = ws.Simulator(scene, swarm, precision=prec, motion=motion, workers=1, device="cpu",
@@ -77,8 +82,9 @@ for _ in range(timings):
     best = min(best, time.thread_time() - t0)
 s = sim.state()
 h = hashlib.sha256()
-for a in (s.position, s.velocity, s.angular_momentum, s.orientation, s.energy):
-    h.update(np.ascontiguousarray(a).tobytes())
+for name in ("position", "velocity", "angular_momentum", "orientation", "energy"):
+    if hasattr(s, name):  # an older revision's state may lack a field
+        h.update(np.ascontiguousarray(getattr(s, name)).tobytes())
 print(json.dumps({"seconds": best, "hash": h.hexdigest()[:16], "file": ws.__file__,
                   "broad_phase": sim.broad_phase}))
 """
@@ -95,6 +101,28 @@ def export_tree(rev: str, root: Path) -> Path:
     for package, folder in sorted(PACKAGE_DIRS.items()):  # "warpsim" first
         shutil.copytree(src / folder, site / package)
     return site
+
+
+def save_grown_room(scene: str, n: int, speed: float | None, folder: Path) -> str:
+    """``benchmarks.speed``'s grown room ``grown-K`` and its swarm of ``n`` (the emitter's
+    speed replaced by ``speed`` [m/s] when given), built by this checkout and saved as arrays
+    in ``folder``, so both sides, whatever their package's version, advance the same spheres
+    among the same boxes. Returns the file's path."""
+    from .speed import SEED, grown_room
+
+    k = int(scene.removeprefix("grown-"))
+    room = grown_room(k, n, np.random.default_rng([SEED, k]))
+    if speed is None:
+        swarm = room.spawn(n=n, seed=20240601)
+    else:
+        emitter = dataclasses.replace(room.emitter, count=n, speed=float(speed))
+        swarm = emitter.spawn(room.boxes, seed=20240601)
+    path = folder / f"{scene}-{n}-{speed}.npz"
+    b = room.boxes
+    np.savez(path, center=b.center, half_extents=b.half_extents, rotation=b.rotation,
+             box_radius=b.radius, position=swarm.position, velocity=swarm.velocity,
+             radius=swarm.radius, mass=swarm.mass)
+    return str(path)
 
 
 def measure(site: Path | None, prec: str, motion: str, n: int, frames: int,
@@ -147,9 +175,12 @@ def main(argv=None) -> None:
         for prec, motion, speed in cases:
             best = {"this": float("inf"), "base": float("inf")}
             hashes = {}
+            scene = args.scene
+            if scene.startswith("grown-"):
+                scene = save_grown_room(scene, n, speed, Path(tmp))
             for _ in range(repeats):
                 for side, where in (("base", site), ("this", None)):
-                    r = measure(where, prec, motion, n, frames, 3, args.scene, speed,
+                    r = measure(where, prec, motion, n, frames, 3, scene, speed,
                                 args.broad_phase)
                     best[side] = min(best[side], r["seconds"])
                     hashes[side] = r["hash"]
