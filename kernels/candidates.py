@@ -199,8 +199,8 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
         ``scalar(c)`` is the same value) and the path's extremes are plain comparisons
         (``wp.min``/``wp.max`` also order NaNs: the positions are finite), so the float-int-float
         round trip and the NaN blends are off the lookup's chain: 0.88 to 0.93x the linear
-        frame at 5 m/s, the same verdicts and bits (BENCHMARKS.md, "The grid lookup's
-        chain").
+        frame at 5 m/s, the same verdicts and bits
+        (BENCHMARKS.md, "The grid lookup's chain").
         """
         fits = int(1)
         index = int(0)
