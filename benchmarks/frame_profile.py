@@ -221,6 +221,9 @@ def profile_case(prec: str, motion: str, speed: float, n: int, seconds: float,
         script = subprocess.run(["perf", "script", "-i", str(data), "-F", "ip"],
                                 capture_output=True, text=True)
         ips = [int(x, 16) for x in script.stdout.split()]
+    if not ips:
+        return {"error": "perf recorded no samples (is perf allowed to sample this user's "
+                         "processes? /proc/sys/kernel/perf_event_paranoid)"}
     obj = Path(where["object"])
     cpp = next(obj.parent.glob("*.cpp"))
     result = attribute(ips, where["address"], obj, cpp, where["kernel_file"], root)
