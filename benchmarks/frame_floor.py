@@ -95,7 +95,7 @@ def part_kernels(sim: ws.Simulator) -> dict:
             for _f in range(frames):
                 d = dt * (v + (HALF * dt) * g)
                 if wp.static(kind == "lookup"):
-                    box, t, n = nearest_hit(x, d, r, boxes, broad)
+                    box, t, n = nearest_hit(x, d, r, -1, boxes, broad)
                     if box >= 0:
                         hits += 1
                 x = x + d
