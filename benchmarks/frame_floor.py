@@ -122,9 +122,11 @@ def with_features(sim: ws.Simulator, **changes) -> ws.Simulator:
     return sim
 
 
-def part_call(sim: ws.Simulator, kernel, frames: int):
-    """A call launching ``kernel`` over ``sim``'s swarm for ``frames`` frames."""
-    out = sim.state_0.empty_like()
+def part_call(sim: ws.Simulator, kernel, frames: int, out=None):
+    """A call launching ``kernel`` over ``sim``'s swarm for ``frames`` frames, its state
+    written into ``out`` (a state like ``sim.state_0``; by default a new one)."""
+    if out is None:
+        out = sim.state_0.empty_like()
     args = [sim.model.boxes, sim.model.broad, sim.model.physics, sim.spheres.radius,
             sim.spheres.mass, frames, sim.state_0.position, sim.state_0.velocity,
             sim.state_0.energy, out.position, out.velocity, out.energy]

@@ -167,15 +167,16 @@ def attribute(ips: list[int], load_address: int, obj: Path, cpp: Path, kernel_fi
 
 #: The child: builds the kernel with line tables, says where it is, then runs on a signal.
 CHILD = r"""
-import ctypes, dataclasses, inspect, json, sys, time
+import ctypes, inspect, json, sys, time
 import warp as wp
 wp.config.quiet = True
 wp.config.cpu_compiler_flags = (wp.config.cpu_compiler_flags or "") + sys.argv[5]
 import warpsim as ws
+from benchmarks.common import ROOM, room_swarm
 prec, motion = sys.argv[1], sys.argv[2]
 speed, n, seconds = float(sys.argv[3]), int(sys.argv[4]), float(sys.argv[6])
-scene = ws.Scene.load("room")
-swarm = dataclasses.replace(scene.emitter, count=n, speed=speed).spawn(scene.boxes, seed=20240601)
+scene = ws.Scene.load(ROOM)
+swarm = room_swarm(scene, n, speed, seed=20240601)
 sim = ws.Simulator(scene, swarm, precision=prec, motion=motion, workers=1, device="cpu")
 sim.build()
 sim.step(1)

@@ -31,11 +31,8 @@ def test_the_frame_floor_partial_loops_build_and_step_free_flight():
     expected = x0 + v0 * t + 0.5 * g * t * t  # the chords' ends lie on the parabola
     for name, kernel in ff.part_kernels(sim).items():
         out = sim.state_0.empty_like()
-        wp.launch(kernel, dim=len(sim), device=sim.device,
-                  inputs=[sim.model.boxes, sim.model.broad, sim.model.physics,
-                          sim.spheres.radius, sim.spheres.mass, frames, sim.state_0.position,
-                          sim.state_0.velocity, sim.state_0.energy, out.position,
-                          out.velocity, out.energy])
+        ff.part_call(sim, kernel, frames, out)()
+        wp.synchronize_device(sim.device)
         got = out.position.numpy().astype(np.float64)
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-4, err_msg=name)
         if name != "+ energy reset":  # the others count hits in their energy slot
