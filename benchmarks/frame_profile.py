@@ -2,12 +2,13 @@
 
 Run from the repository root (Linux, with ``perf`` allowed to sample a process of this user):
 ``python -m benchmarks.frame_profile [--quick] [--cases float32/linear,...] [--speeds 5,60]
-[--seconds S] [--top K] [--out PATH]``.
+[--seconds S] [--top K] [--broad-phase B] [--out PATH]``.
 
 For each case (precision/motion) and speed, a child process builds the standard room's frame
 kernel (its emitter's swarm of 20 000 spheres with the speed replaced, ``workers=1``, the broad
-phase ``auto`` picks) with line tables (the module's ``cpu_compiler_flags`` plus clang's
-``-debug-info-kind=line-tables-only``: the same optimised code, a separate cache entry), says
+phase ``auto`` picks, or ``--broad-phase``) with line tables (the module's
+``cpu_compiler_flags`` plus clang's ``-debug-info-kind=line-tables-only``: the same optimised
+code, a separate cache entry), says
 where Warp loaded the kernel, and advances the swarm for ``S`` seconds while ``perf record -e
 cpu-clock`` samples it. Each sample's address, less the kernel's load address, is an offset in
 the module's object file; ``addr2line`` gives the innermost line of the generated C++ there, and
@@ -38,6 +39,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from warpsim.vocabulary import BroadPhase
 
 from .common import finish, parser, print_table, start
 
@@ -177,7 +180,8 @@ prec, motion = sys.argv[1], sys.argv[2]
 speed, n, seconds = float(sys.argv[3]), int(sys.argv[4]), float(sys.argv[6])
 scene = ws.Scene.load(ROOM)
 swarm = room_swarm(scene, n, speed, seed=20240601)
-sim = ws.Simulator(scene, swarm, precision=prec, motion=motion, workers=1, device="cpu")
+sim = ws.Simulator(scene, swarm, precision=prec, motion=motion, workers=1, device="cpu",
+                   broad_phase=sys.argv[7])
 sim.build()
 sim.step(1)
 wp.synchronize_device("cpu")
@@ -198,12 +202,12 @@ print(json.dumps({"frames": frames}), flush=True)
 
 
 def profile_case(prec: str, motion: str, speed: float, n: int, seconds: float,
-                 root: Path) -> dict:
+                 root: Path, broad_phase: str = "auto") -> dict:
     """One case's profile (see the module docstring)."""
     with tempfile.TemporaryDirectory() as tmp:
         child = subprocess.Popen(
             [sys.executable, "-c", CHILD, prec, motion, str(speed), str(n), LINE_TABLES,
-             str(seconds)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+             str(seconds), broad_phase], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL, text=True, cwd=root)
         where = json.loads(child.stdout.readline() or "{}")
         if "address" not in where:
@@ -228,7 +232,8 @@ def profile_case(prec: str, motion: str, speed: float, n: int, seconds: float,
     obj = Path(where["object"])
     cpp = next(obj.parent.glob("*.cpp"))
     result = attribute(ips, where["address"], obj, cpp, where["kernel_file"], root)
-    result.update(precision=prec, motion=motion, speed=speed, n=n, seconds=seconds)
+    result.update(precision=prec, motion=motion, speed=speed, n=n, seconds=seconds,
+                  broad_phase=broad_phase)
     return result
 
 
@@ -239,6 +244,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--speeds", default="5,60", help="comma-separated speeds [m/s] (5,60)")
     p.add_argument("--seconds", type=float, default=None, help="sampled run per case [s]")
     p.add_argument("--top", type=int, default=None, help="statements listed per case")
+    p.add_argument("--broad-phase", default="auto",
+                   choices=[b.value for b in BroadPhase],
+                   help="the simulator's broad_phase (default auto)")
     args = p.parse_args(argv)
     if args.device != "cpu":
         p.error("--device: the profile maps samples of the CPU kernel; only cpu is supported")
@@ -257,7 +265,8 @@ def main(argv: list[str] | None = None) -> None:
     runs = []
     for prec, motion in cases:
         for speed in speeds:
-            run = profile_case(prec, motion, speed, sizes["n"], seconds, root)
+            run = profile_case(prec, motion, speed, sizes["n"], seconds, root,
+                               args.broad_phase)
             runs.append(run)
             if "error" in run:
                 print(f"\n{prec} {motion} {speed:g} m/s: {run['error']}")
