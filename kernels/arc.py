@@ -56,8 +56,9 @@ MAX_ROOT_ITERATIONS = 64
 #: The walk is a ``while`` loop that stops at its first piece with nothing left to do: Warp
 #: copies the body of a ``for`` over a constant range of up to 16 iterations once per
 #: iteration, which made the walk alone a fifth of a ballistic frame kernel's C++ and its first
-#: build on the CPU 1.4x as long, for no speed (the same bits; the small loops below stay
-#: ``for`` loops: the sharp entries' as a ``while`` cost 7 % at 60 m/s in the room).
+#: build on the CPU 1.4x as long, for no speed (the same bits). The entry passes and the sharp
+#: entries below stay ``for`` loops: as ``while`` loops they made the float32 ballistic frame
+#: in the room 1.04 to 1.14x slower (BENCHMARKS.md, "The ballistic walk as a while loop").
 MAX_PIECES = 13
 
 #: Passes of the grown-box entry search: each pass but the last moves to the start of a new
