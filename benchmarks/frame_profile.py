@@ -20,8 +20,15 @@ What a share means: the CPU retires instructions in order, so a statement that w
 load, on a long chain of arithmetic, or for the pipeline to refill after a mispredicted branch)
 collects the samples of the wait; a share is where time passes, not how much arithmetic a
 statement holds. Samples land within a few instructions of where they are taken, and the
-optimiser interleaves statements, so shares of a few percent are approximate. The profile
-measures no speed: compare costs with ``benchmarks.hot_loop``.
+optimiser interleaves statements, so shares of a few percent are approximate.
+
+The child also times its sampled run (the CPU time of its thread, over the spheres and frames it
+advanced), so each function's share becomes nanoseconds per sphere-frame. Two comparisons follow
+the profiles, function by function, in those nanoseconds: each case's last speed against its
+first (where a faster swarm's extra time goes), and at each speed each later case against the
+first (``--cases float32/linear,float32/ballistic``: where the ballistic frame's extra time
+goes). The timing runs under ``perf`` in one process per case, so it is rough: compare costs
+with ``benchmarks.hot_loop``, side by side.
 """
 
 from __future__ import annotations
@@ -192,12 +199,12 @@ address = ctypes.cast(hooks.forward, ctypes.c_void_p).value
 print(json.dumps({"address": address, "object": str(exe.binary_path),
                   "kernel_file": inspect.getsourcefile(kernel.func)}), flush=True)
 sys.stdin.readline()
-start, frames = time.time(), 0
+start, cpu, frames = time.time(), time.thread_time(), 0
 while time.time() - start < seconds:
     sim.step(60)
     frames += 60
 wp.synchronize_device("cpu")
-print(json.dumps({"frames": frames}), flush=True)
+print(json.dumps({"frames": frames, "cpu_s": time.thread_time() - cpu}), flush=True)
 """
 
 
@@ -220,7 +227,7 @@ def profile_case(prec: str, motion: str, speed: float, n: int, seconds: float,
         time.sleep(0.5)  # perf attached before the run starts
         child.stdin.write("go\n")
         child.stdin.flush()
-        child.stdout.readline()
+        ran = json.loads(child.stdout.readline() or "{}")
         child.wait()
         perf.wait(timeout=60)
         script = subprocess.run(["perf", "script", "-i", str(data), "-F", "ip"],
@@ -234,7 +241,54 @@ def profile_case(prec: str, motion: str, speed: float, n: int, seconds: float,
     result = attribute(ips, where["address"], obj, cpp, where["kernel_file"], root)
     result.update(precision=prec, motion=motion, speed=speed, n=n, seconds=seconds,
                   broad_phase=broad_phase)
+    if ran.get("frames"):
+        result["ns_per_sphere_frame"] = 1e9 * ran["cpu_s"] / (n * ran["frames"])
     return result
+
+
+def run_title(run: dict) -> str:
+    """``precision motion speed m/s``."""
+    return f"{run['precision']} {run['motion']} {run['speed']:g} m/s"
+
+
+def function_ns(run: dict) -> dict[str, float]:
+    """Each function's share of the run's kernel samples times the run's cost [ns per
+    sphere-frame]: the nanoseconds per sphere-frame that pass in it."""
+    total = max(run["in_kernel"], 1)
+    return {f["function"]: run["ns_per_sphere_frame"] * f["samples"] / total
+            for f in run["functions"]}
+
+
+def compare(base: dict, other: dict, top: int) -> list[dict]:
+    """The functions whose nanoseconds per sphere-frame (:func:`function_ns`) differ the most
+    between two runs, the largest increase first, and a last row with the sum over every
+    function (the two runs' whole difference)."""
+    a, b = function_ns(base), function_ns(other)
+    rows = [{"function": fn, "base": a.get(fn, 0.0), "other": b.get(fn, 0.0),
+             "difference": b.get(fn, 0.0) - a.get(fn, 0.0)} for fn in set(a) | set(b)]
+    rows.sort(key=lambda r: (-r["difference"], r["function"]))
+    whole = {"function": "(every function)", "base": sum(a.values()),
+             "other": sum(b.values()), "difference": sum(b.values()) - sum(a.values())}
+    return rows[:top] + [whole]
+
+
+def comparisons(runs: list[dict]) -> list[tuple[dict, dict]]:
+    """The pairs of runs worth comparing: each case's last speed against its first, and at
+    each speed each later case against the first case (runs with an error or no timing are
+    left out)."""
+    ok = [r for r in runs if "error" not in r and "ns_per_sphere_frame" in r]
+    pairs = []
+    cases = list(dict.fromkeys((r["precision"], r["motion"]) for r in ok))
+    speeds = list(dict.fromkeys(r["speed"] for r in ok))
+    by = {(r["precision"], r["motion"], r["speed"]): r for r in ok}
+    for case in cases:
+        have = [by[(*case, s)] for s in speeds if (*case, s) in by]
+        if len(have) > 1:
+            pairs.append((have[0], have[-1]))
+    for s in speeds:
+        have = [by[(*c, s)] for c in cases if (*c, s) in by]
+        pairs.extend((have[0], other) for other in have[1:])
+    return pairs
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -281,10 +335,21 @@ def main(argv: list[str] | None = None) -> None:
                          ("statement", "statement", "")])
             rows = [{"share": 100.0 * f["samples"] / total, "function": f["function"]}
                     for f in run["functions"][:12]]
-            print_table(f"{prec} {motion}, {speed:g} m/s: by function (file:def line)", rows,
+            cost = run.get("ns_per_sphere_frame")
+            cost_text = f", {cost:.2f} ns per sphere-frame" if cost else ""
+            print_table(f"{prec} {motion}, {speed:g} m/s: by function (file:def line)"
+                        f"{cost_text}", rows,
                         [("share [%]", "share", ".1f"), ("function", "function", "")])
-    finish(out, {"machine": info, "quick": args.quick, "seconds": seconds, "runs": runs},
-           started)
+    compared = []
+    for base, other in comparisons(runs):
+        rows = compare(base, other, top)
+        print_table(f"{run_title(other)} against {run_title(base)}: ns per sphere-frame by "
+                    "function (share x the run's cost)", rows,
+                    [("function", "function", ""), (run_title(base), "base", ".2f"),
+                     (run_title(other), "other", ".2f"), ("difference", "difference", "+.2f")])
+        compared.append({"base": run_title(base), "other": run_title(other), "rows": rows})
+    finish(out, {"machine": info, "quick": args.quick, "seconds": seconds, "runs": runs,
+                 "compared": compared}, started)
 
 
 if __name__ == "__main__":
