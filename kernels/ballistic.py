@@ -76,7 +76,8 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
     normal speed 0.
 
     Returns:
-        Namespace with ``ballistic_path``.
+        Namespace with ``ballistic_path``, and its two halves for a caller with a loop of its
+        own: ``free_legs`` and ``held_rest``.
     """
     p = precision(features.precision)
     scalar, vec3 = p.scalar, p.vec3
@@ -559,6 +560,122 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
                 broad, frame, sphere, events, -1, ZERO, vec3(ZERO, ZERO, ZERO))
         return a, v, L, energy, bounces, capped, supported
 
+    def path_loop(defer: bool):
+        """:func:`ballistic_path`'s loop; with ``defer``, a contact that may be a support ends
+        it without the call of :func:`held_rest`, and what that call would take comes back
+        (see :func:`free_legs`)."""
+
+        @wp.func(inline=True)
+        def loop(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
+                 physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
+                 events: EventBuffer):
+            g = physics.gravity
+            dt = physics.dt
+            max_bounces = physics.max_bounces
+            rest = dt  # time left in the frame [s]
+            bounces = int(0)
+            capped = int(0)
+            supported = int(0)
+            done = int(0)
+            left = int(-1)  # the box the rest of the frame's arc leaves (it cannot meet it again)
+            held = int(0)  # deferred: a support contact ends the loop (box, s, n below)
+            held_box = int(-1)
+            held_s = ZERO
+            held_n = vec3(ZERO, ZERO, ZERO)
+            # the centre, velocity and angular momentum the loop carries, as three scalars each
+            # (p, w and M in a pass): merged at the loop's branches as vec3s, float64 kept them
+            # in stack slots, as it had the linear loop's (bounce.py; BENCHMARKS.md, "float64:
+            # the ballistic loop's state in registers too")
+            a0 = a[0]
+            a1 = a[1]
+            a2 = a[2]
+            v0 = v[0]
+            v1 = v[1]
+            v2 = v[2]
+            l0 = L[0]
+            l1 = L[1]
+            l2 = L[2]
+            while done == 0:
+                p = vec3(a0, a1, a2)
+                w = vec3(v0, v1, v2)
+                M = vec3(l0, l1, l2)
+                box, s, n = nearest_free_leg(p, w, g, rest, r, left, boxes, broad)
+                if box < 0:
+                    p = arc_point(p, w, g, rest)
+                    w = w + rest * g
+                    done = 1
+                elif bounces >= max_bounces:
+                    capped = 1  # time left and a contact ahead: stay at the last contact
+                    done = 1
+                else:
+                    u = w + s * g
+                    un = wp.dot(u, n)
+                    if resting(g, n, un, p, arc_point(p, w, g, s) - p, boxes.radius[box] + r,
+                               boxes.extent[box]) == 1:
+                        if wp.static(defer):
+                            held = 1
+                            held_box = box
+                            held_s = s
+                            held_n = n
+                        else:
+                            p, w, M, energy, bounces, capped, supported = held_rest(
+                                p, w, M, energy, rest, bounces, capped, supported, r, m,
+                                physics, boxes, broad, frame, sphere, events, box, s, n)
+                        done = 1
+                    else:  # a bounce
+                        bounces += 1
+                        contact = arc_contact_centre(p, w, g, s, n, boxes.radius[box] + r,
+                                                     boxes.extent[box])
+                        rest = wp.max(rest - s, ZERO)
+                        if wp.static(features.spin):
+                            M = on_contact.spin(M, u, n, r, m, physics)
+                        w = u - TWO * un * n
+                        if wp.static(features.lossy):
+                            energy = on_contact.loss(energy, m, contact, physics)
+                            w = w * on_contact.keep(physics)
+                        on_contact.event(frame, sphere, box, 0, contact, n, (dt - rest) / dt,
+                                         -un, events)
+                        p = contact
+                        left = int(-1)
+                        if leaves_for_the_frame(w, g, n, rest) == 1:
+                            left = box
+                a0 = p[0]
+                a1 = p[1]
+                a2 = p[2]
+                v0 = w[0]
+                v1 = w[1]
+                v2 = w[2]
+                l0 = M[0]
+                l1 = M[1]
+                l2 = M[2]
+            return (vec3(a0, a1, a2), vec3(v0, v1, v2), vec3(l0, l1, l2), energy, bounces,
+                    capped, supported, held, rest, held_box, held_s, held_n)
+
+        return loop
+
+    whole_loop = path_loop(False)
+    deferring_loop = path_loop(True)
+
+    @wp.func(inline=True)
+    def free_legs(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
+                  physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
+                  events: EventBuffer):
+        """:func:`ballistic_path` up to its first contact that may be a support, without the
+        call of :func:`held_rest` (which a caller makes outside its hot loop: an out-of-line
+        call in a loop keeps the loop's values in memory across it, every frame; BENCHMARKS.md,
+        "The ballistic frame's support path out of its loop").
+
+        Returns:
+            ``(position, velocity, L, energy, bounces, capped, supported, held, rest, box, s,
+            n)``: with ``held`` 0 the frame's end, as :func:`ballistic_path` returns it; with
+            ``held`` 1 the state at the start of the free leg that met ``box`` at ``s`` [s]
+            along it (outward normal ``n``), ``rest`` [s] of the frame left: ``held_rest(
+            position, velocity, L, energy, rest, bounces, capped, supported, ..., box, s, n)``
+            gives the frame's end, the bits of :func:`ballistic_path`.
+        """
+        return deferring_loop(a, v, r, m, L, energy, physics, boxes, broad, frame, sphere,
+                              events)
+
     @wp.func(inline=True)
     def ballistic_path(a: vec3, v: vec3, r: scalar, m: scalar, L: vec3, energy: scalar,
                        physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
@@ -584,76 +701,9 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         Free flight and plain bounces run here; from the first contact that may be a support
         on, the frame ends in :func:`held_rest`.
         """
-        g = physics.gravity
-        dt = physics.dt
-        max_bounces = physics.max_bounces
-        rest = dt  # time left in the frame [s]
-        bounces = int(0)
-        capped = int(0)
-        supported = int(0)
-        done = int(0)
-        left = int(-1)  # the box the rest of the frame's arc leaves (it cannot meet it again)
-        # the centre, velocity and angular momentum the loop carries, as three scalars each
-        # (p, w and M in a pass): merged at the loop's branches as vec3s, float64 kept them in
-        # stack slots, as it had the linear loop's (bounce.py; BENCHMARKS.md, "float64: the
-        # ballistic loop's state in registers too")
-        a0 = a[0]
-        a1 = a[1]
-        a2 = a[2]
-        v0 = v[0]
-        v1 = v[1]
-        v2 = v[2]
-        l0 = L[0]
-        l1 = L[1]
-        l2 = L[2]
-        while done == 0:
-            p = vec3(a0, a1, a2)
-            w = vec3(v0, v1, v2)
-            M = vec3(l0, l1, l2)
-            box, s, n = nearest_free_leg(p, w, g, rest, r, left, boxes, broad)
-            if box < 0:
-                p = arc_point(p, w, g, rest)
-                w = w + rest * g
-                done = 1
-            elif bounces >= max_bounces:
-                capped = 1  # time left and a contact ahead: stay at the last contact
-                done = 1
-            else:
-                u = w + s * g
-                un = wp.dot(u, n)
-                if resting(g, n, un, p, arc_point(p, w, g, s) - p, boxes.radius[box] + r,
-                           boxes.extent[box]) == 1:
-                    p, w, M, energy, bounces, capped, supported = held_rest(
-                        p, w, M, energy, rest, bounces, capped, supported, r, m, physics,
-                        boxes, broad, frame, sphere, events, box, s, n)
-                    done = 1
-                else:  # a bounce
-                    bounces += 1
-                    contact = arc_contact_centre(p, w, g, s, n, boxes.radius[box] + r,
-                                                 boxes.extent[box])
-                    rest = wp.max(rest - s, ZERO)
-                    if wp.static(features.spin):
-                        M = on_contact.spin(M, u, n, r, m, physics)
-                    w = u - TWO * un * n
-                    if wp.static(features.lossy):
-                        energy = on_contact.loss(energy, m, contact, physics)
-                        w = w * on_contact.keep(physics)
-                    on_contact.event(frame, sphere, box, 0, contact, n, (dt - rest) / dt, -un,
-                                     events)
-                    p = contact
-                    left = int(-1)
-                    if leaves_for_the_frame(w, g, n, rest) == 1:
-                        left = box
-            a0 = p[0]
-            a1 = p[1]
-            a2 = p[2]
-            v0 = w[0]
-            v1 = w[1]
-            v2 = w[2]
-            l0 = M[0]
-            l1 = M[1]
-            l2 = M[2]
-        return (vec3(a0, a1, a2), vec3(v0, v1, v2), vec3(l0, l1, l2), energy, bounces, capped,
-                supported)
+        a, v, L, energy, bounces, capped, supported, _held, _rest, _box, _s, _n = whole_loop(
+            a, v, r, m, L, energy, physics, boxes, broad, frame, sphere, events)
+        return a, v, L, energy, bounces, capped, supported
 
-    return SimpleNamespace(ballistic_path=ballistic_path)
+    return SimpleNamespace(ballistic_path=ballistic_path, free_legs=free_legs,
+                           held_rest=held_rest)

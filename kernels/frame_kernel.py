@@ -38,6 +38,13 @@ run:
   a test every frame (``Features.free_horizon`` False, checked by the tests). Otherwise the
   frame is tested alone, as before.
 
+A ballistic frame whose free legs meet a contact that may be a support is held there
+(``ballistic.ballistic_funcs``' ``free_legs``) and finished outside the loop of frames
+(``held_rest``, out of line, then the same settling and counts): the kernel's loop of frames
+holds no call, which kept its values in memory across it every frame (0.76 to 0.93x the
+ballistic frame in the standard room, the same bits; BENCHMARKS.md, "The ballistic frame's
+support path out of its loop"). Frames, records and counts are those of the whole frame.
+
 With ``free_reset_every = 1`` the kernel gives the bits of the kernel without the step. The
 orientation of a spinning sphere still turns every frame (its turn over a frame computed once a
 run: ``L`` does not change in free flight).
@@ -122,8 +129,14 @@ def frame_kernel(features: Features):
     free_flight = features.free_flight
     births = features.births
     motion = features.motion
-    if motion == "ballistic":
-        path = ballistic_funcs(features).ballistic_path
+    # the ballistic frame's free legs stop at a contact that may be a support, and the kernel
+    # finishes that frame (``held_rest``, out of line) outside its loop of frames: a call in
+    # the loop kept the loop's values in memory across it, every frame (BENCHMARKS.md, "The
+    # ballistic frame's support path out of its loop")
+    defer = motion == "ballistic"
+    if defer:
+        ballistic = ballistic_funcs(features)
+        path, held_rest = ballistic.free_legs, ballistic.held_rest
     else:
         path = bounce_funcs(features).bounce_path
     dyn = dynamics_funcs(p)
@@ -352,6 +365,12 @@ def frame_kernel(features: Features):
                                 physics.dt)
 
     @wp.func(inline=True)
+    def nothing_held():
+        """What a frame that is not held returns for :func:`finish_frame`: ``(held, rest,
+        box, s, n, held_counts)`` = ``(0, 0, -1, 0, 0, 0)``."""
+        return int(0), ZERO, int(-1), ZERO, vec3(ZERO, ZERO, ZERO), wp.vec3i(0, 0, 0)
+
+    @wp.func(inline=True)
     def one_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
                   physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int, sphere: int,
                   events: EventBuffer):
@@ -370,15 +389,21 @@ def frame_kernel(features: Features):
         capped = int(0)
         supports = int(0)
         clear = int(-1)
+        held, rest, box, s, n, _counts = nothing_held()
         if wp.static(free_flight):
             clear = frame_clear(x, v, r, physics, boxes, -1)
         if clear >= 0:
             x, v = free_move(x, v, physics)
         else:
-            x, v, L, energy, bounces, capped, supports = path(x, v, r, m, L, energy, physics,
-                                                              boxes, broad, frame, sphere, events)
-        v, o, energy = settle(x, v, L, o, energy, r, m, physics, supports)
-        return x, v, L, o, energy, bounces, capped, supports
+            if wp.static(defer):
+                x, v, L, energy, bounces, capped, supports, held, rest, box, s, n = path(
+                    x, v, r, m, L, energy, physics, boxes, broad, frame, sphere, events)
+            else:
+                x, v, L, energy, bounces, capped, supports = path(
+                    x, v, r, m, L, energy, physics, boxes, broad, frame, sphere, events)
+        if held == 0:
+            v, o, energy = settle(x, v, L, o, energy, r, m, physics, supports)
+        return x, v, L, o, energy, bounces, capped, supports, held, rest, box, s, n
 
     @wp.func(inline=True)
     def counted_frame(live: int, x: vec3, v: vec3, L: vec3, o: quat, energy: scalar,
@@ -386,12 +411,38 @@ def frame_kernel(features: Features):
                       frame: int, sphere: int, events: EventBuffer, bounces: int, supports: int,
                       capped: int):
         """:func:`one_frame` for a sphere that exists (``live`` 1; 0: the state stays), its
-        counts added to the launch's (bounces that reflect, supports, capped frames)."""
+        counts added to the launch's (bounces that reflect, supports, capped frames). A
+        ballistic frame held at a contact that may be a support (``held`` 1) comes back as
+        :func:`one_frame` leaves it, with its own counts (``held_counts``: bounces, capped,
+        supports), for :func:`finish_frame`."""
+        held, rest, box, s, n, held_counts = nothing_held()
         if live == 1:
-            x, v, L, o, energy, b, c, s = one_frame(x, v, L, o, energy, r, m, physics, boxes,
-                                                    broad, frame, sphere, events)
-            bounces += b - s
-            supports += s
+            x, v, L, o, energy, b, c, sp, held, rest, box, s, n = one_frame(
+                x, v, L, o, energy, r, m, physics, boxes, broad, frame, sphere, events)
+            if held == 0:
+                bounces += b - sp
+                supports += sp
+                capped += c
+            else:
+                held_counts = wp.vec3i(b, c, sp)
+        return x, v, L, o, energy, bounces, supports, capped, held, rest, box, s, n, held_counts
+
+    @wp.func(inline=True)
+    def finish_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
+                     physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
+                     sphere: int, events: EventBuffer, rest: scalar, box: int, s: scalar,
+                     n: vec3, held_counts: wp.vec3i, bounces: int, supports: int, capped: int):
+        """The rest of a ballistic frame :func:`counted_frame` held (its state and counts),
+        from its contact with ``box`` at ``s`` [s] along the leg (normal ``n``, ``rest`` [s]
+        of the frame left): ``held_rest``, the settling and the counts, as :func:`one_frame`
+        and :func:`counted_frame` would have made them."""
+        if wp.static(defer):
+            x, v, L, energy, b, c, sp = held_rest(
+                x, v, L, energy, rest, held_counts[0], held_counts[1], held_counts[2], r, m,
+                physics, boxes, broad, frame, sphere, events, box, s, n)
+            v, o, energy = settle(x, v, L, o, energy, r, m, physics, sp)
+            bounces += b - sp
+            supports += sp
             capped += c
         return x, v, L, o, energy, bounces, supports, capped
 
@@ -421,6 +472,33 @@ def frame_kernel(features: Features):
                         record_angular_velocity_out[row, i] = vec3()
                 row += 1
         return row
+
+    @wp.func(inline=True)
+    def held_frame(f: int, frame_count: int, record_every: int, row: int, i: int,
+                   with_motion: bool, x: vec3, v: vec3, L_held: vec3, o_held: quat, L: vec3,
+                   o: quat, energy: scalar, r: scalar, m: scalar, physics: Physics,
+                   boxes: Boxes, broad: BroadPhase, sphere: int, events: EventBuffer,
+                   rest: scalar, box: int, s: scalar, n: vec3, held_counts: wp.vec3i,
+                   bounces: int, supports: int, capped: int, orientation_in: wp.array[quat],
+                   record_position_out: wp.array2d[vec3],
+                   record_orientation_out: wp.array2d[quat],
+                   record_velocity_out: wp.array2d[vec3],
+                   record_angular_velocity_out: wp.array2d[vec3]):
+        """The launch's frame ``f`` that :func:`counted_frame` held (its state, ``L_held`` and
+        ``o_held`` as it returned them), finished (:func:`finish_frame`) and recorded, with
+        the kernel's ``L`` and ``o`` updated where they are the loop's (spin); returns the
+        state, the counts and the next record row."""
+        x, v, L_held, o_held, energy, bounces, supports, capped = finish_frame(
+            x, v, L_held, o_held, energy, r, m, physics, boxes, broad, f + 1, sphere, events,
+            rest, box, s, n, held_counts, bounces, supports, capped)
+        if wp.static(spin):
+            L = L_held
+            o = o_held
+        row = record_frame(f, frame_count, record_every, row, i, with_motion, x, v, L, o, r, m,
+                           physics, orientation_in, record_position_out,
+                           record_orientation_out, record_velocity_out,
+                           record_angular_velocity_out)
+        return x, v, L, o, energy, bounces, supports, capped, row
 
     @variant_kernel
     def advance_frames(
@@ -476,6 +554,12 @@ def frame_kernel(features: Features):
         born = int(0)
         if wp.static(births):
             born = birth_frame[i] - first_frame  # frames of this launch before its birth
+        # a ballistic frame held at a contact that may be a support: its state and counts
+        # (counted_frame), finished outside the inner loop of frames (finish_frame)
+        held, rest, box, s, n, held_counts = nothing_held()
+        L_new = L
+        o_new = o
+        f = int(0)
         if wp.static(free_flight):
             # a frame beyond every box's bounds takes the free step; a run of them goes on in
             # a loop of its own, with no call of the bounce loop in it (the same moves, bits)
@@ -483,95 +567,112 @@ def frame_kernel(features: Features):
             age = first_frame  # the sphere's age after the launch's frame f is age + f + 1
             if wp.static(births):
                 age = first_frame - birth_frame[i]
-            f = int(0)
-            free = int(-2)  # the test of frame f: an axis, -1 (not free), -2 (not made yet)
-            while f < frame_count:
-                live = int(1)
-                if wp.static(births):
-                    if f < born:
-                        live = 0
-                if live == 1 and free == -2:
-                    free = frame_clear(x, v, r, physics, boxes, -1)
-                if live == 1 and free >= 0:
-                    turn_by = o
-                    turning = int(0)
-                    if wp.static(spin):
-                        turn_by, turning = spin_turn(L, o, r, m, physics)
-                    # frames to the next energy reset: an age multiple of RESET_EVERY
-                    to_reset = RESET_EVERY - (age + f) % RESET_EVERY
-                    while free >= 0 and f < frame_count:
-                        # frames to take untested: up to the next reset, record and the
-                        # launch's end, when they and the frame after them are proven clear
-                        n = wp.min(to_reset, frame_count - f)
-                        if record_every > 0:
-                            n = wp.min(n, record_every - f % record_every)
-                        after = int(-2)  # the test of the frame after them
-                        if wp.static(horizon):
-                            sure = horizon_clear(x, v, grow, physics, boxes, free, n + 1)
-                            if sure >= 0:
-                                free = sure
-                                after = sure
+        free = int(-2)  # free flight: the test of frame f: an axis, -1 (not free), -2 (not made)
+        while f < frame_count:
+            if wp.static(free_flight):
+                while held == 0 and f < frame_count:
+                    live = int(1)
+                    if wp.static(births):
+                        if f < born:
+                            live = 0
+                    if live == 1 and free == -2:
+                        free = frame_clear(x, v, r, physics, boxes, -1)
+                    if live == 1 and free >= 0:
+                        turn_by = o
+                        turning = int(0)
+                        if wp.static(spin):
+                            turn_by, turning = spin_turn(L, o, r, m, physics)
+                        # frames to the next energy reset: an age multiple of RESET_EVERY
+                        to_reset = RESET_EVERY - (age + f) % RESET_EVERY
+                        while free >= 0 and f < frame_count:
+                            # frames to take untested: up to the next reset, record and the
+                            # launch's end, when they and the frame after them are proven clear
+                            k = wp.min(to_reset, frame_count - f)
+                            if record_every > 0:
+                                k = wp.min(k, record_every - f % record_every)
+                            after = int(-2)  # the test of the frame after them
+                            if wp.static(horizon):
+                                sure = horizon_clear(x, v, grow, physics, boxes, free, k + 1)
+                                if sure >= 0:
+                                    free = sure
+                                    after = sure
+                                else:
+                                    k = 1
                             else:
-                                n = 1
-                        else:
-                            n = 1
-                        for _k in range(n):
-                            x, v = free_move(x, v, physics)
-                            if wp.static(spin):
-                                o = turned(o, turn_by, turning)
-                        f += n
-                        to_reset -= n
-                        # the last frame's energy reset: at an age multiple of RESET_EVERY, and
-                        # before a frame that is not free (tested at the launch's end too, so
-                        # that the state is that of any other split into launches)
-                        reset = int(0)
-                        if to_reset == 0:
-                            reset = 1
-                            to_reset = RESET_EVERY
-                        elif after == -2:
-                            after = frame_clear(x, v, r, physics, boxes, free)
-                            if after < 0:
+                                k = 1
+                            for _k in range(k):
+                                x, v = free_move(x, v, physics)
+                                if wp.static(spin):
+                                    o = turned(o, turn_by, turning)
+                            f += k
+                            to_reset -= k
+                            # the last frame's energy reset: at an age multiple of
+                            # RESET_EVERY, and before a frame that is not free (tested at the
+                            # launch's end too, so that the state is that of any other split
+                            # into launches)
+                            reset = int(0)
+                            if to_reset == 0:
                                 reset = 1
-                        if reset == 1:
-                            v = free_reset(x, v, energy, m, physics)
-                            after = -2
-                            if f < frame_count:
+                                to_reset = RESET_EVERY
+                            elif after == -2:
                                 after = frame_clear(x, v, r, physics, boxes, free)
-                        row = record_frame(f - 1, frame_count, record_every, row, i,
-                                           with_motion, x, v, L, o, r, m, physics,
-                                           orientation_in, record_position_out,
-                                           record_orientation_out, record_velocity_out,
-                                           record_angular_velocity_out)
-                        free = after
-                else:
-                    x, v, L_new, o_new, energy, bounces, supports, capped = counted_frame(
+                                if after < 0:
+                                    reset = 1
+                            if reset == 1:
+                                v = free_reset(x, v, energy, m, physics)
+                                after = -2
+                                if f < frame_count:
+                                    after = frame_clear(x, v, r, physics, boxes, free)
+                            row = record_frame(f - 1, frame_count, record_every, row, i,
+                                               with_motion, x, v, L, o, r, m, physics,
+                                               orientation_in, record_position_out,
+                                               record_orientation_out, record_velocity_out,
+                                               record_angular_velocity_out)
+                            free = after
+                    else:
+                        (x, v, L_new, o_new, energy, bounces, supports, capped, held, rest, box,
+                         s, n, held_counts) = counted_frame(
+                            live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1,
+                            sphere, events_out, bounces, supports, capped)
+                        if held == 0:
+                            if wp.static(spin):  # else L and o are not the loop's
+                                L = L_new
+                                o = o_new
+                            row = record_frame(f, frame_count, record_every, row, i,
+                                               with_motion, x, v, L, o, r, m, physics,
+                                               orientation_in, record_position_out,
+                                               record_orientation_out, record_velocity_out,
+                                               record_angular_velocity_out)
+                            f += 1
+                            free = -2
+            else:
+                while held == 0 and f < frame_count:
+                    live = int(1)
+                    if wp.static(births):
+                        if f < born:
+                            live = 0
+                    (x, v, L_new, o_new, energy, bounces, supports, capped, held, rest, box, s,
+                     n, held_counts) = counted_frame(
                         live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1, sphere,
                         events_out, bounces, supports, capped)
-                    if wp.static(spin):  # else L and o are not the loop's
-                        L = L_new
-                        o = o_new
-                    row = record_frame(f, frame_count, record_every, row, i, with_motion, x, v,
-                                       L, o, r, m, physics, orientation_in, record_position_out,
-                                       record_orientation_out, record_velocity_out,
-                                       record_angular_velocity_out)
-                    f += 1
-                    free = -2
-        else:
-            for f in range(frame_count):
-                live = int(1)
-                if wp.static(births):
-                    if f < born:
-                        live = 0
-                x, v, L_new, o_new, energy, bounces, supports, capped = counted_frame(
-                    live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1, sphere,
-                    events_out, bounces, supports, capped)
-                if wp.static(spin):  # else L and o are not the loop's
-                    L = L_new
-                    o = o_new
-                row = record_frame(f, frame_count, record_every, row, i, with_motion, x, v, L,
-                                   o, r, m, physics, orientation_in, record_position_out,
-                                   record_orientation_out, record_velocity_out,
-                                   record_angular_velocity_out)
+                    if held == 0:
+                        if wp.static(spin):  # else L and o are not the loop's
+                            L = L_new
+                            o = o_new
+                        row = record_frame(f, frame_count, record_every, row, i, with_motion,
+                                           x, v, L, o, r, m, physics, orientation_in,
+                                           record_position_out, record_orientation_out,
+                                           record_velocity_out, record_angular_velocity_out)
+                        f += 1
+            if held == 1:
+                x, v, L, o, energy, bounces, supports, capped, row = held_frame(
+                    f, frame_count, record_every, row, i, with_motion, x, v, L_new, o_new, L, o,
+                    energy, r, m, physics, boxes, broad, sphere, events_out, rest, box, s, n,
+                    held_counts, bounces, supports, capped, orientation_in, record_position_out,
+                    record_orientation_out, record_velocity_out, record_angular_velocity_out)
+                held = 0
+                f += 1
+                free = -2
         position_out[i] = x
         velocity_out[i] = v
         energy_out[i] = energy
