@@ -158,8 +158,13 @@ def rotated_box_slides(rng, n):
 FAMILIES = {"plates": plates_drop, "wedge": wedge_drop, "rotated box": rotated_box_slides}
 
 
-@pytest.mark.parametrize("precision_name", ["float32", "float64"])
-@pytest.mark.parametrize("retention, spin", [(1.0, False), (0.5, False), (0.5, True)])
+#: (precision, retention, spin): each a test kernel of its own (a first build of some seconds),
+#: so elastic and lossy, with and without spin, and both precisions, in four of them.
+VARIANTS = [("float32", 1.0, False), ("float64", 0.5, False), ("float32", 0.5, True),
+            ("float64", 0.5, True)]
+
+
+@pytest.mark.parametrize("precision_name, retention, spin", VARIANTS)
 @pytest.mark.parametrize("family", sorted(FAMILIES))
 def test_the_two_halves_give_the_whole_frames_bits(family, retention, spin, precision_name):
     rng = np.random.default_rng([len(family), int(retention * 10), spin])
