@@ -366,7 +366,7 @@ def frame_kernel(features: Features):
 
     @wp.func(inline=True)
     def nothing_held():
-        """What a frame that is not held returns for :func:`finish_frame`: ``(held, rest,
+        """What a frame that is not held returns for :func:`held_frame`: ``(held, rest,
         box, s, n, held_counts)`` = ``(0, 0, -1, 0, 0, 0)``."""
         return int(0), ZERO, int(-1), ZERO, vec3(ZERO, ZERO, ZERO), wp.vec3i(0, 0, 0)
 
@@ -414,7 +414,7 @@ def frame_kernel(features: Features):
         counts added to the launch's (bounces that reflect, supports, capped frames). A
         ballistic frame held at a contact that may be a support (``held`` 1) comes back as
         :func:`one_frame` leaves it, with its own counts (``held_counts``: bounces, capped,
-        supports), for :func:`finish_frame`."""
+        supports), for :func:`held_frame`."""
         held, rest, box, s, n, held_counts = nothing_held()
         if live == 1:
             x, v, L, o, energy, b, c, sp, held, rest, box, s, n = one_frame(
@@ -426,25 +426,6 @@ def frame_kernel(features: Features):
             else:
                 held_counts = wp.vec3i(b, c, sp)
         return x, v, L, o, energy, bounces, supports, capped, held, rest, box, s, n, held_counts
-
-    @wp.func(inline=True)
-    def finish_frame(x: vec3, v: vec3, L: vec3, o: quat, energy: scalar, r: scalar, m: scalar,
-                     physics: Physics, boxes: Boxes, broad: BroadPhase, frame: int,
-                     sphere: int, events: EventBuffer, rest: scalar, box: int, s: scalar,
-                     n: vec3, held_counts: wp.vec3i, bounces: int, supports: int, capped: int):
-        """The rest of a ballistic frame :func:`counted_frame` held (its state and counts),
-        from its contact with ``box`` at ``s`` [s] along the leg (normal ``n``, ``rest`` [s]
-        of the frame left): ``held_rest``, the settling and the counts, as :func:`one_frame`
-        and :func:`counted_frame` would have made them."""
-        if wp.static(defer):
-            x, v, L, energy, b, c, sp = held_rest(
-                x, v, L, energy, rest, held_counts[0], held_counts[1], held_counts[2], r, m,
-                physics, boxes, broad, frame, sphere, events, box, s, n)
-            v, o, energy = settle(x, v, L, o, energy, r, m, physics, sp)
-            bounces += b - sp
-            supports += sp
-            capped += c
-        return x, v, L, o, energy, bounces, supports, capped
 
     @wp.func(inline=True)
     def record_frame(f: int, frame_count: int, record_every: int, row: int, i: int,
@@ -485,15 +466,22 @@ def frame_kernel(features: Features):
                    record_velocity_out: wp.array2d[vec3],
                    record_angular_velocity_out: wp.array2d[vec3]):
         """The launch's frame ``f`` that :func:`counted_frame` held (its state, ``L_held`` and
-        ``o_held`` as it returned them), finished (:func:`finish_frame`) and recorded, with
-        the kernel's ``L`` and ``o`` updated where they are the loop's (spin); returns the
-        state, the counts and the next record row."""
-        x, v, L_held, o_held, energy, bounces, supports, capped = finish_frame(
-            x, v, L_held, o_held, energy, r, m, physics, boxes, broad, f + 1, sphere, events,
-            rest, box, s, n, held_counts, bounces, supports, capped)
-        if wp.static(spin):
-            L = L_held
-            o = o_held
+        ``o_held`` and its own counts as it returned them), finished from its contact with
+        ``box`` at ``s`` [s] along the leg (normal ``n``, ``rest`` [s] of the frame left):
+        ``held_rest``, the settling, the counts and the record, as :func:`one_frame` and
+        :func:`counted_frame` would have made them, the kernel's ``L`` and ``o`` updated where
+        they are the loop's (spin). Returns the state, the counts and the next record row."""
+        if wp.static(defer):
+            x, v, L_held, energy, b, c, sp = held_rest(
+                x, v, L_held, energy, rest, held_counts[0], held_counts[1], held_counts[2], r,
+                m, physics, boxes, broad, f + 1, sphere, events, box, s, n)
+            v, o_held, energy = settle(x, v, L_held, o_held, energy, r, m, physics, sp)
+            bounces += b - sp
+            supports += sp
+            capped += c
+            if wp.static(spin):
+                L = L_held
+                o = o_held
         row = record_frame(f, frame_count, record_every, row, i, with_motion, x, v, L, o, r, m,
                            physics, orientation_in, record_position_out,
                            record_orientation_out, record_velocity_out,
@@ -555,7 +543,7 @@ def frame_kernel(features: Features):
         if wp.static(births):
             born = birth_frame[i] - first_frame  # frames of this launch before its birth
         # a ballistic frame held at a contact that may be a support: its state and counts
-        # (counted_frame), finished outside the inner loop of frames (finish_frame)
+        # (counted_frame), finished outside the inner loop of frames (held_frame)
         held, rest, box, s, n, held_counts = nothing_held()
         L_new = L
         o_new = o
