@@ -14,17 +14,20 @@ its kernels first (``Simulator.build``), runs one untimed warm-up launch and the
 of several timed ``sim.step(F)`` from the same start state. The time is the CPU time of the
 launching thread (``time.thread_time``: with ``workers=1`` the CPU launch runs in it), so the
 time a shared machine's other work holds the core is not counted; contention for caches still
-is, hence the best of many turns. The table gives the best ns per
-sphere-frame of each side, their ratio, and whether the final states are bit-identical (a
-SHA-256 of the state's bytes). ``--scene grown-K`` advances ``benchmarks.speed``'s grown room
-of ``K`` boxes: built with its swarm by this checkout and saved as arrays, which every side
-loads, so a revision older than the generator or the benchmarks' helpers (``--against
-ed0e912``, 1 December) runs the same spheres among the same boxes. With ``--speeds``, each case
-runs once per speed, the swarm drawn from the scene's emitter with its speed replaced (every
-direction), and each side's cost at the last speed against the first is printed (issue 20: 60
-m/s against 5 m/s over a whole run). ``--broad-phase`` forces both sides' broad phase (the
-default ``auto`` picks the grid in the standard room, so a change to the BVH's loop needs
-``--broad-phase bvh``, or a grown room whose paths leave the grid's cells).
+is, hence the best of many turns. The table gives the best ns per sphere-frame of each side,
+their ratio, the ratio of the two sides' median turns, the spread (the larger side's slowest
+turn against its fastest, less one: on this shared 2-core machine 5 to 10 % is common, so a
+ratio within a few percent of 1 is not a difference), and whether the final states are
+bit-identical (a SHA-256 of the state's bytes). ``--scene grown-K`` advances
+``benchmarks.speed``'s grown room of ``K`` boxes: built with its swarm by this checkout and
+saved as arrays, which every side loads, so a revision older than the generator or the
+benchmarks' helpers (``--against ed0e912``, 1 December) runs the same spheres among the same
+boxes. With ``--speeds``, each case runs once per speed, the swarm drawn from the scene's
+emitter with its speed replaced (every direction), and each side's cost at the last speed
+against the first is printed (issue 20: 60 m/s against 5 m/s over a whole run).
+``--broad-phase`` forces both sides' broad phase (the default ``auto`` picks the grid in the
+standard room, so a change to the BVH's loop needs ``--broad-phase bvh``, or a grown room whose
+paths leave the grid's cells).
 """
 
 from __future__ import annotations
@@ -173,7 +176,7 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         site = export_tree(rev, Path(tmp))
         for prec, motion, speed in cases:
-            best = {"this": float("inf"), "base": float("inf")}
+            turns = {"base": [], "this": []}  # each turn's best of 3 [s]
             hashes = {}
             scene = args.scene
             if scene.startswith("grown-"):
@@ -182,15 +185,20 @@ def main(argv=None) -> None:
                 for side, where in (("base", site), ("this", None)):
                     r = measure(where, prec, motion, n, frames, 3, scene, speed,
                                 args.broad_phase)
-                    best[side] = min(best[side], r["seconds"])
+                    turns[side].append(r["seconds"])
                     hashes[side] = r["hash"]
+            best = {k: min(v) for k, v in turns.items()}
             ns = {k: v / (n * frames) * 1e9 for k, v in best.items()}
+            median = {k: float(np.median(v)) for k, v in turns.items()}
             rows.append({"precision": prec, "motion": motion, "speed": speed or "scene",
                          "broad_phase": r["broad_phase"],
                          "base_ns": ns["base"], "this_ns": ns["this"],
                          "ratio": ns["this"] / ns["base"],
+                         "median_ratio": median["this"] / median["base"],
+                         "spread": max(max(v) / min(v) - 1.0 for v in turns.values()),
                          "identical": "yes" if hashes["this"] == hashes["base"] else "NO",
-                         "base_s": best["base"], "this_s": best["this"]})
+                         "base_s": best["base"], "this_s": best["this"],
+                         "base_turns_s": turns["base"], "this_turns_s": turns["this"]})
             print(f"  {prec} {motion} {speed or ''}: {ns['base']:.2f} -> {ns['this']:.2f} ns",
                   flush=True)
     print_table(f"Frame kernel, scene {args.scene}, N = {n:,}, F = {frames}, one core, best of "
@@ -198,7 +206,8 @@ def main(argv=None) -> None:
                 rows, [("precision", "precision", "s"), ("motion", "motion", "s"),
                        ("m/s", "speed", ""), ("broad phase", "broad_phase", "s"),
                        (f"{rev} [ns]", "base_ns", ".2f"), ("this [ns]", "this_ns", ".2f"),
-                       ("ratio", "ratio", ".3f"), ("identical", "identical", "s")])
+                       ("ratio", "ratio", ".3f"), ("ratio of medians", "median_ratio", ".3f"),
+                       ("spread", "spread", ".1%"), ("identical", "identical", "s")])
     speed_ratios = {}
     if len(speeds) > 1:
         for prec, motion in {(row["precision"], row["motion"]) for row in rows}:
