@@ -23,10 +23,17 @@ side by side, from the same swarm (the scene's emitter drawn by this checkout an
 arrays, with the scene's boxes and physics), and says whether the two final states are the
 same bits. With two ``--speeds``, each side's figures at the last speed against the first
 are printed too (issue 20: 60 m/s against 5 m/s).
+
+``--where N`` builds the kernel with line tables (``frame_profile``'s, which leave the code
+as it was: the totals do not change) and has callgrind keep its counts per instruction; each
+instruction of the kernel is mapped onto the Python statement whose generated code it is in,
+as ``frame_profile`` maps its samples, and the N statements with the most mispredicted
+branches are listed per case and side: where the branches that a fast swarm makes hard are.
 """
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import json
 import os
@@ -41,6 +48,13 @@ from pathlib import Path
 import numpy as np
 
 from .common import finish, parser, print_table, start
+from .frame_profile import (
+    LINE_TABLES,
+    forward_offset,
+    generated_statements,
+    innermost_cpp_lines,
+    statement_at,
+)
 from .hot_loop import CASES, export_tree
 
 #: The events callgrind counts with ``--branch-sim=yes``, in the order of its summary line.
@@ -49,13 +63,15 @@ EVENTS = {"Ir": "instructions", "Bc": "branches", "Bcm": "mispredicted",
 
 #: The counted process: builds, waits, steps ``F`` frames while counted, then hashes its state.
 CHILD = r"""
-import hashlib, json, sys
+import ctypes, hashlib, inspect, json, sys
 import numpy as np
 import warp as wp
 wp.config.quiet = True
 import warpsim as ws
-prec, motion, frames, broad_phase, data = sys.argv[1:6]
+prec, motion, frames, broad_phase, data, flags = sys.argv[1:7]
 frames = int(frames)
+if flags:  # line tables, for --where
+    wp.config.cpu_compiler_flags = (wp.config.cpu_compiler_flags or "") + flags
 d = np.load(data)
 scene = ws.Scene(ws.RoundedBoxes(d["center"], d["half_extents"], d["rotation"], d["box_radius"]),
                  **json.loads(str(d["physics"])))
@@ -65,7 +81,14 @@ sim = ws.Simulator(scene, swarm, precision=prec, motion=motion, workers=1, devic
 sim.build()
 sim.step(1)
 wp.synchronize_device("cpu")
-print("ready", flush=True)
+where = {}
+kernel = getattr(sim, "_kernel", None)
+if kernel is not None:  # where the kernel's code is, for --where
+    exe = next(iter(kernel.module.execs.values()))
+    forward = exe.get_kernel_hooks(kernel).forward
+    where = {"address": ctypes.cast(forward, ctypes.c_void_p).value,
+             "object": str(exe.binary_path), "kernel_file": inspect.getsourcefile(kernel.func)}
+print(json.dumps(where), flush=True)
 sys.stdin.readline()
 sim.step(frames)
 wp.synchronize_device("cpu")
@@ -122,30 +145,41 @@ def save_case(scene_name: str, n: int, speed: float | None, folder: Path) -> str
 
 
 def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: str,
-          data: str) -> dict:
+          data: str, where: bool = False) -> dict:
     """One process's counted events (totals) and its state's hash; ``site`` None is this
-    checkout's installed package."""
+    checkout's installed package. With ``where``, the kernel is built with line tables and
+    ``statements`` holds the events of each Python statement of it (:func:`statement_events`).
+    """
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = str(site)
     with tempfile.TemporaryDirectory() as tmp:
+        dump = ["--dump-instr=yes", "--dump-line=no", "--compress-pos=no",
+                "--compress-strings=no"] if where else []
         child = subprocess.Popen(
             ["valgrind", "--tool=callgrind", "--instr-atstart=no", "--branch-sim=yes",
-             "--toggle-collect=ffi_call*",
+             "--toggle-collect=ffi_call*", *dump,
              f"--callgrind-out-file={tmp}/callgrind.out", sys.executable, "-c", CHILD, prec,
-             motion, str(frames), broad_phase, data],
+             motion, str(frames), broad_phase, data, LINE_TABLES if where else ""],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             env=env, cwd=tmp)
         try:
             # counting on when it has built and taken its first frame, off after the frames
-            for expected, switch in (("ready", "on"), ("done", "off")):
-                if child.stdout.readline().strip() != expected:
+            ready = child.stdout.readline()
+            if not ready.startswith("{"):
+                raise RuntimeError("the counted process did not start")
+            located = json.loads(ready)
+            for expected, switch in (("", "on"), ("done", "off")):
+                if expected and child.stdout.readline().strip() != expected:
                     raise RuntimeError(f"the counted process did not say {expected!r}")
                 subprocess.run(["callgrind_control", "-i", switch, str(child.pid)],
                                check=True, capture_output=True)
                 child.stdin.write("go\n")
                 child.stdin.flush()
             out, err = child.communicate(timeout=600)
+            if where and located:
+                text = Path(f"{tmp}/callgrind.out").read_text(encoding="utf-8")
+                statements = statement_events(text, located)
         finally:
             if child.poll() is None:
                 child.kill()
@@ -158,7 +192,48 @@ def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: s
     if site is not None and not result["file"].startswith(str(site)):
         raise RuntimeError(f"the revision's process imported {result['file']}")
     result.update({EVENTS[k]: v for k, v in counted.items() if k in EVENTS})
+    if where:
+        result["statements"] = statements if located else []
     return result
+
+
+def statement_events(text: str, located: dict) -> list[dict]:
+    """The events of a callgrind dump (``--dump-instr=yes``, uncompressed) at the kernel's
+    instructions, summed per Python statement of the kernel (``frame_profile``'s mapping:
+    the object's line tables, then the generated C++'s statement comments); the events of a
+    call site's callee (the line after ``calls=``) are the callee's, not counted there."""
+    obj = Path(located["object"])
+    base = located["address"] - forward_offset(obj)
+    names, per_offset, after_call = [], collections.defaultdict(lambda: [0, 0, 0]), False
+    for line in text.splitlines():
+        if line.startswith("events:"):
+            names = line.split()[1:]
+        elif line.startswith("calls="):
+            after_call = True
+        elif line.startswith("0x"):
+            if after_call:
+                after_call = False
+                continue
+            addr, *values = line.split()
+            offset = int(addr, 16) - base
+            if 0 <= offset < 1 << 24:
+                got = dict(zip(names, map(int, values), strict=False))
+                cost = per_offset[offset]
+                for i, key in enumerate(("Ir", "Bc", "Bcm")):
+                    cost[i] += got.get(key, 0)
+    lines = innermost_cpp_lines(obj, sorted(per_offset))
+    cpp = next(obj.parent.glob("*.cpp")).read_text(encoding="utf-8")
+    statements = generated_statements(cpp, located["kernel_file"])
+    by: dict[tuple, list[int]] = collections.defaultdict(lambda: [0, 0, 0])
+    for offset, cost in per_offset.items():
+        line = lines.get(offset)
+        s = statement_at(statements, line) if line is not None else None
+        key = (Path(s.file).name, s.line, s.text) if s else ("?", 0, "(no line)")
+        for i in range(3):
+            by[key][i] += cost[i]
+    return [{"file": f, "line": ln, "text": t, "instructions": c[0], "branches": c[1],
+             "mispredicted": c[2]} for (f, ln, t), c in sorted(by.items(), key=lambda kv:
+                                                               -kv[1][2])]
 
 
 def main(argv=None) -> None:
@@ -173,6 +248,9 @@ def main(argv=None) -> None:
                         "the scene's own")
     p.add_argument("--broad-phase", default="auto",
                    help="the simulators' broad_phase (default auto; bvh, brute, grid, walk)")
+    p.add_argument("--where", type=int, default=0, metavar="N",
+                   help="also list, per case and side, the N statements of the kernel with "
+                        "the most mispredicted branches (built with line tables)")
     args = p.parse_args(argv)
     if args.device != "cpu":
         sys.exit("benchmarks.instructions counts the CPU kernel: --device must be cpu")
@@ -196,8 +274,14 @@ def main(argv=None) -> None:
                 row = {"precision": prec, "motion": motion, "speed": speed or "scene"}
                 hashes = {}
                 for side, where in sides:
-                    r = count(where, prec, motion, frames, args.broad_phase, data)
+                    r = count(where, prec, motion, frames, args.broad_phase, data,
+                              where=args.where > 0)
                     hashes[side] = r["hash"]
+                    if args.where:
+                        row[f"{side}_statements"] = [
+                            {**st, **{k: st[k] / (n * frames)
+                                      for k in ("instructions", "branches", "mispredicted")}}
+                            for st in r["statements"]]
                     row["broad_phase"] = r["broad_phase"]
                     for key in ("instructions", "branches", "mispredicted"):
                         row[f"{side}_{key}"] = r[key] / (n * frames)
@@ -220,6 +304,16 @@ def main(argv=None) -> None:
     print_table(f"Frame kernel under callgrind, scene {args.scene}, N = {n:,}, F = {frames}, "
                 "per sphere-frame" + (f": {rev} against this checkout" if rev else ""),
                 rows, columns)
+    for row in rows if args.where else []:
+        for side, _ in sides:
+            name = rev if side == "base" else "this"
+            print_table(f"{name}, {row['precision']} {row['motion']}, {row['speed']} m/s: the "
+                        f"{args.where} statements with the most mispredicted branches, per "
+                        "sphere-frame", row[f"{side}_statements"][:args.where],
+                        [("mispredicted", "mispredicted", ".3f"),
+                         ("branches", "branches", ".2f"),
+                         ("instructions", "instructions", ".1f"),
+                         ("file", "file", "s"), ("line", "line", ""), ("statement", "text", "s")])
     speed_ratios = {}
     if len(speeds) > 1:
         for prec, motion in cases:

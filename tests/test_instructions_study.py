@@ -73,3 +73,22 @@ def test_callgrind_counts_the_frames_and_only_them(tmp_path):
     for field in ("position", "velocity", "angular_momentum", "orientation", "energy"):
         h.update(np.ascontiguousarray(getattr(s, field)).tobytes())
     assert one["hash"] == h.hexdigest()[:16]
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("valgrind") is None or shutil.which("callgrind_control") is None
+                    or shutil.which("addr2line") is None,
+                    reason="valgrind or addr2line is not installed")
+def test_where_puts_the_counts_on_the_kernels_statements(tmp_path):
+    """``--where``: the kernel's statements hold all but a sliver of the counted instructions
+    (the rest is the launch's C++ around the kernel), the same totals as without line tables,
+    and the cell list's loop is among the statements of a grid run."""
+    path = study.save_case("room", 300, 60.0, tmp_path)
+    plain = study.count(None, "float32", "linear", 10, "auto", path)
+    where = study.count(None, "float32", "linear", 10, "auto", path, where=True)
+    assert where["instructions"] == pytest.approx(plain["instructions"], rel=1e-3)
+    placed = sum(s["instructions"] for s in where["statements"] if s["file"] != "?")
+    assert placed >= 0.97 * where["instructions"]
+    assert sum(s["mispredicted"] for s in where["statements"]) <= where["mispredicted"]
+    assert any(s["file"] == "candidates.py" and "cell_start" in s["text"]
+               for s in where["statements"])
