@@ -120,11 +120,16 @@ def save_grown_room(scene: str, n: int, speed: float | None, folder: Path) -> st
     else:
         emitter = dataclasses.replace(room.emitter, count=n, speed=float(speed))
         swarm = emitter.spawn(room.boxes, seed=20240601)
-    path = folder / f"{scene}-{n}-{speed}.npz"
-    b = room.boxes
-    np.savez(path, center=b.center, half_extents=b.half_extents, rotation=b.rotation,
-             box_radius=b.radius, position=swarm.position, velocity=swarm.velocity,
-             radius=swarm.radius, mass=swarm.mass)
+    return save_arrays(folder / f"{scene}-{n}-{speed}.npz", room.boxes, swarm)
+
+
+def save_arrays(path: Path, boxes, swarm, **extra) -> str:
+    """Boxes and swarm as the arrays a child process of any revision rebuilds them from
+    (``center``, ``half_extents``, ``rotation``, ``box_radius``; ``position``, ``velocity``,
+    ``radius``, ``mass``), with ``extra`` arrays beside them. Returns the file's path."""
+    np.savez(path, center=boxes.center, half_extents=boxes.half_extents,
+             rotation=boxes.rotation, box_radius=boxes.radius, position=swarm.position,
+             velocity=swarm.velocity, radius=swarm.radius, mass=swarm.mass, **extra)
     return str(path)
 
 

@@ -7,11 +7,12 @@ float32/linear,...] [--speeds 5,60] [--scene room] [--broad-phase auto] [--quick
 valgrind (Debian's ``valgrind`` package: ``valgrind`` and ``callgrind_control``).
 
 Each case runs in a fresh process under ``valgrind --tool=callgrind --instr-atstart=no
---branch-sim=yes``: it builds its simulator (the kernel from Warp's cache; the build is not
-counted) and advances one frame, then the parent switches counting on (``callgrind_control
--i on``) for ``sim.step(F)`` and off after it. The figures are the process's events in that
-span divided by ``N F``: the kernel's work and Warp's launch of it from Python (a few
-thousand instructions a launch, nothing against ``N F`` sphere-frames). The mispredictions
+--branch-sim=yes --toggle-collect=ffi_call*``: it builds its simulator (the kernel from Warp's
+cache; the build is not counted) and advances one frame, then the parent switches counting on
+(``callgrind_control -i on``) for ``sim.step(F)`` and off after it, and within that span only
+the calls ctypes makes are counted (the kernel, called through libffi, and Warp's few native
+calls around it; Python's own work for the launch is not). The figures are those events
+divided by ``N F``. The mispredictions
 are those of callgrind's simulated predictor (two-bit counters indexed by branch address
 and recent history), not of this CPU's: a proxy for the branches that a predictor finds
 hard, such as a fast swarm's "does this box pass the reject". Instructions are not time
@@ -55,7 +56,7 @@ from .frame_profile import (
     innermost_cpp_lines,
     statement_at,
 )
-from .hot_loop import CASES, export_tree
+from .hot_loop import CASES, export_tree, save_arrays
 
 #: The events callgrind counts with ``--branch-sim=yes``, in the order of its summary line.
 EVENTS = {"Ir": "instructions", "Bc": "branches", "Bcm": "mispredicted",
@@ -136,12 +137,8 @@ def save_case(scene_name: str, n: int, speed: float | None, folder: Path) -> str
         emitter = dataclasses.replace(emitter, speed=float(speed))
     swarm = dataclasses.replace(emitter, count=n).spawn(scene.boxes, seed=20240601)
     physics = {k: plain(getattr(scene, k)) for k in PHYSICS}
-    b = scene.boxes
-    path = folder / f"{scene_name}-{n}-{speed}.npz"
-    np.savez(path, center=b.center, half_extents=b.half_extents, rotation=b.rotation,
-             box_radius=b.radius, position=swarm.position, velocity=swarm.velocity,
-             radius=swarm.radius, mass=swarm.mass, physics=json.dumps(physics))
-    return str(path)
+    return save_arrays(folder / f"{scene_name}-{n}-{speed}.npz", scene.boxes, swarm,
+                       physics=json.dumps(physics))
 
 
 def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: str,

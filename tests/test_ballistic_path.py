@@ -76,6 +76,19 @@ def path_kernel(precision_name: str, lossy: bool, spin: bool):
     return ballistic_path_test
 
 
+def physics_struct(p, dt: float, friction: float = 0.0, retention: float = 1.0,
+                   max_bounces: int = MAX_BOUNCES):
+    """The kernels' ``Physics`` for these tests: gravity ``-GRAVITY`` along y, the potential's
+    origin at 0, ``max_rot`` 50 rad/s, the cap on contacts a frame ``max_bounces``."""
+    physics = model_structs(p).Physics()
+    physics.gravity = p.vec3(0.0, -GRAVITY, 0.0)
+    physics.origin = p.vec3(0.0, 0.0, 0.0)
+    physics.dt, physics.friction = p.scalar(dt), p.scalar(friction)
+    physics.max_rot, physics.retention = p.scalar(50.0), p.scalar(retention)
+    physics.max_bounces = max_bounces
+    return physics
+
+
 def run(boxes, x, v, frames, dt, precision_name="float64", radius=R, retention=1.0,
         spin=False, friction=0.0, record=False):
     """Advance spheres ``frames`` frames; returns the final state (float64 numpy) and counters."""
@@ -83,12 +96,7 @@ def run(boxes, x, v, frames, dt, precision_name="float64", radius=R, retention=1
     dtp = p.np_dtype
     n = len(x)
     device_structs = device_boxes(boxes, p)
-    physics = model_structs(p).Physics()
-    physics.gravity = p.vec3(0.0, -GRAVITY, 0.0)
-    physics.origin = p.vec3(0.0, 0.0, 0.0)
-    physics.dt, physics.friction = p.scalar(dt), p.scalar(friction)
-    physics.max_rot, physics.retention = p.scalar(50.0), p.scalar(retention)
-    physics.max_bounces = MAX_BOUNCES
+    physics = physics_struct(p, dt, friction, retention)
     g = np.array([0.0, -GRAVITY, 0.0])
     mass = np.ones(n)
     r = np.broadcast_to(np.asarray(radius, float), (n,))

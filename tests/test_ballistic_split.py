@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import warp as wp
 from test_arc_sweep import device_boxes
+from test_ballistic_path import GRAVITY, physics_struct
 
 import warpsim as ws
 from warpsim.kernels.ballistic import ballistic_funcs
@@ -22,7 +23,6 @@ from warpsim.kernels.data import Features, model_structs
 from warpsim.kernels.precision import precision as precision_of
 from warpsim.model import event_buffer
 
-GRAVITY = 9.81
 DT = 1.0 / 60.0
 MAX_BOUNCES = 8
 
@@ -86,14 +86,7 @@ def compare_halves(boxes: ws.RoundedBoxes, x, v, frames: int, precision_name: st
     dtp = p.np_dtype
     n = len(x)
     structs = device_boxes(boxes, p)
-    physics = model_structs(p).Physics()
-    physics.gravity = p.vec3(0.0, -GRAVITY, 0.0)
-    physics.origin = p.vec3(0.0, 0.0, 0.0)
-    physics.dt = p.scalar(DT)
-    physics.friction = p.scalar(0.4 if spin else 0.0)
-    physics.max_rot = p.scalar(50.0)
-    physics.retention = p.scalar(retention)
-    physics.max_bounces = MAX_BOUNCES
+    physics = physics_struct(p, DT, 0.4 if spin else 0.0, retention, MAX_BOUNCES)
     mass = np.ones(n)
     x = np.asarray(x, float)
     v = np.asarray(v, float)
