@@ -91,6 +91,7 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
     arc_contact_centre = nearest_arc_funcs(p).arc_contact_centre
     arc_point = arc_funcs(p).arc_point
     separation_lift = nearest_funcs(p).separation_lift
+    separation_bound = nearest_funcs(p).separation_bound
     on_contact = contact_funcs(p, features.spin, features.lossy, features.events)
     slide = slide_funcs(p, features.broad_phase)
     face_exit, feature_of, normal_force = slide.face_exit, slide.feature_of, slide.normal_force
@@ -158,9 +159,10 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         out = int(0)
         if gn < -TANGENT_REL * wp.length(g):
             limit = RESTING
-            lift = separation_lift(a, leg, extent)
-            if big_r < TWO * lift:
-                limit = wp.max(limit, wp.sqrt(EIGHT * -gn * lift))
+            if big_r < TWO * separation_bound(a, leg, extent):  # else above twice the lift
+                lift = separation_lift(a, leg, extent)
+                if big_r < TWO * lift:
+                    limit = wp.max(limit, wp.sqrt(EIGHT * -gn * lift))
             if -un <= limit:
                 out = 1
         return out

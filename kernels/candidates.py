@@ -394,11 +394,14 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
         # frame cost 1.25 to 1.29x in a room of 16 boxes, the same bits (BENCHMARKS.md, "Brute
         # force: the loop without the struct's copy"); the grid's and the BVH's loops written
         # so measured no gain, and keep it
-        for k in range(boxes.center.shape[0]):
+        k = int(0)
+        count = boxes.center.shape[0]
+        while k < count:
             center = boxes.center[k]
             if considered(q, center, boxes.extent[k], k) == 1:
                 best, best_t, best_n = closer(q, center, boxes.rotation[k], boxes.half_extents[k],
                                               boxes.radius[k], k, best, best_t, best_n)
+            k += 1
         return best, best_t, best_n
 
     @wp.func(inline=True)
@@ -407,9 +410,12 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
         best = int(-1)
         best_t = q.tau
         best_n = vec3(ZERO, ZERO, ZERO)
-        for j in range(broad.cell_start[cell], broad.cell_start[cell + 1]):
+        j = broad.cell_start[cell]
+        end = broad.cell_start[cell + 1]
+        while j < end:
             best, best_t, best_n = candidate(q, boxes, broad.cell_boxes[j], best, best_t,
                                              best_n)
+            j += 1
         return best, best_t, best_n
 
     @wp.func(inline=True)
@@ -441,9 +447,11 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
                         found[count] = k
                     count += 1
                 if count <= BVH_BATCH:
-                    for j in range(count):
+                    j = int(0)
+                    while j < count:
                         best, best_t, best_n = candidate(q, boxes, found[j], best, best_t,
                                                          best_n)
+                        j += 1
                 else:  # more than a batch: the same boxes in the same order, as they come
                     query = wp.bvh_query_aabb(broad.bvh, lower, upper)
             if count > BVH_BATCH:
@@ -589,7 +597,9 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
             walking = int(1)
             while walking == 1:
                 cell = c0 + n0 * (c1 + n1 * c2)
-                for j in range(broad.cell_start[cell], broad.cell_start[cell + 1]):
+                j = broad.cell_start[cell]
+                end = broad.cell_start[cell + 1]
+                while j < end:
                     entry = broad.cell_boxes[j]
                     if fresh_bit == 0 or (entry & fresh_bit) != 0:
                         # the chord against the box's bounds first, on the entry's own copy of
@@ -598,6 +608,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
                                    broad.entry_bounds[2 * j + 1], pad, best_t) == 1:
                             best, best_t, best_n = candidate(q, boxes, entry >> FLAG_BITS, best,
                                                              best_t, best_n)
+                    j += 1
                 # the next cell: across the nearest face
                 enter = wp.min(wp.min(t0, t1), t2)
                 if enter > f1 or enter * q.tau > best_t:

@@ -588,10 +588,12 @@ def frame_kernel(features: Features):
                                     k = 1
                             else:
                                 k = 1
-                            for _k in range(k):
+                            taken = int(0)
+                            while taken < k:
                                 x, v = free_move(x, v, physics)
                                 if wp.static(spin):
                                     o = turned(o, turn_by, turning)
+                                taken += 1
                             f += k
                             to_reset -= k
                             # the last frame's energy reset: at an age multiple of

@@ -38,7 +38,8 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
     """Build the chord's ``@wp.func``s for one precision.
 
     Returns:
-        Namespace with ``chord_path``, ``sweep_chord``, ``contact_centre`` and ``separate``.
+        Namespace with ``chord_path``, ``sweep_chord``, ``contact_centre``, ``separate``,
+        ``separation_lift`` and ``separation_bound``.
     """
     scalar, vec3, mat33 = p.scalar, p.vec3, p.mat33
     Path = path_struct(p)
@@ -59,13 +60,30 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         return SEPARATION * wp.max(wp.max(inf_norm(x), inf_norm(travel)), inf_norm(extent))
 
     @wp.func
+    def magnitude_sum(x: vec3):
+        """``|x_0| + |x_1| + |x_2|``, rounded: at least the largest of them (a sum of terms
+        >= 0 rounded to nearest is never below one of its terms)."""
+        return wp.abs(x[0]) + wp.abs(x[1]) + wp.abs(x[2])
+
+    @wp.func
+    def separation_bound(x: vec3, travel: vec3, extent: vec3):
+        """An upper bound [m] of :func:`separation_lift` without its branches: ``SEPARATION``
+        times the sum of the nine magnitudes, at least their largest (:func:`magnitude_sum`;
+        the rounded product is monotone in its factor). Which magnitude is the largest is a
+        coin toss that a branch mispredicts, so a radius is tested against this first."""
+        return SEPARATION * (magnitude_sum(x) + magnitude_sum(travel) + magnitude_sum(extent))
+
+    @wp.func
     def separate(contact: vec3, travel: vec3, normal: vec3, big_r: scalar, extent: vec3):
         """``contact`` moved out along the unit ``normal`` by :func:`separation_lift` when the
-        Minkowski radius ``big_r`` is below it: else bit for bit."""
-        lift = separation_lift(contact, travel, extent)
+        Minkowski radius ``big_r`` is below it: else bit for bit. A radius at or above
+        :func:`separation_bound` is not below the lift, so the lift is computed only under
+        the bound."""
         out = contact
-        if big_r < lift:
-            out = contact + lift * normal
+        if big_r < separation_bound(contact, travel, extent):
+            lift = separation_lift(contact, travel, extent)
+            if big_r < lift:
+                out = contact + lift * normal
         return out
 
     @wp.func
@@ -106,7 +124,7 @@ def nearest_funcs(p: Precision) -> SimpleNamespace:
         return sweep_box(q.a, q.v, q.r, center, rotation, half_extents, box_radius)
 
     return SimpleNamespace(chord_path=chord_path, sweep_chord=sweep_chord,
-                           separation_lift=separation_lift,
+                           separation_lift=separation_lift, separation_bound=separation_bound,
                            contact_centre=contact_centre, separate=separate)
 
 

@@ -320,9 +320,12 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
                     if k != skip:
                         best, best_s, best_n = candidate(q, boxes, k, best, best_s, best_n)
         else:
-            for k in range(boxes.center.shape[0]):
+            k = int(0)
+            count = boxes.center.shape[0]
+            while k < count:
                 if k != skip:
                     best, best_s, best_n = candidate(q, boxes, k, best, best_s, best_n)
+                k += 1
         return best, best_s, best_n
 
     @wp.func
