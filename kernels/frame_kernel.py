@@ -588,7 +588,7 @@ def frame_kernel(features: Features):
                                     k = 1
                             else:
                                 k = 1
-                            taken = int(0)
+                            taken = int(0)  # a while loop: see candidates.nearest_cell
                             while taken < k:
                                 x, v = free_move(x, v, physics)
                                 if wp.static(spin):
