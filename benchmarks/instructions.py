@@ -6,15 +6,16 @@ Run from the repository root: ``python -m benchmarks.instructions [--against REV
 float32/linear,...] [--speeds 5,60] [--scene room] [--broad-phase auto] [--quick]``. Needs
 valgrind (Debian's ``valgrind`` package: ``valgrind`` and ``callgrind_control``).
 
-Each case runs in a fresh process under ``valgrind --tool=callgrind --instr-atstart=no
---branch-sim=yes --toggle-collect=ffi_call*``: it builds its simulator (the kernel from Warp's
-cache; the build is not counted) and advances one frame, then the parent switches counting on
-(``callgrind_control -i on``) for ``sim.step(F)`` and off after it, and within that span only
-the calls ctypes makes are counted (the kernel, called through libffi, and Warp's few native
-calls around it; Python's own work for the launch is not). The figures are those events
-divided by ``N F``. The mispredictions
-are those of callgrind's simulated predictor (two-bit counters indexed by branch address
-and recent history), not of this CPU's: a proxy for the branches that a predictor finds
+Each case's kernel is first built outside valgrind (:func:`native_build`), then the case
+runs in a fresh process under ``valgrind --tool=callgrind --instr-atstart=no --branch-sim=yes
+--toggle-collect=ffi_call*``: it loads that build (the object this machine runs, though
+valgrind's CPU shows fewer ISA features than the machine's), advances one frame, then the
+parent switches counting on (``callgrind_control -i on``) for ``sim.step(F)`` and off after
+it, and within that span only the calls ctypes makes are counted (the kernel, called through
+libffi, and Warp's few native calls around it; Python's own work for the launch is not).
+The figures are those events divided by ``N F``. The mispredictions are those of
+callgrind's simulated predictor (two-bit counters indexed by branch address and recent
+history), not of this CPU's: a proxy for the branches that a predictor finds
 hard, such as a fast swarm's "does this box pass the reject". Instructions are not time
 (stalls, cache misses and this CPU's own predictor are not counted), so this study tells
 whether a change removed work or mispredictions, and ``hot_loop`` whether that was time.
@@ -62,15 +63,28 @@ from .hot_loop import CASES, export_tree, save_arrays
 EVENTS = {"Ir": "instructions", "Bc": "branches", "Bcm": "mispredicted",
           "Bi": "indirect", "Bim": "indirect_mispredicted"}
 
+#: The environment variable that gives the counted process the ISA features of the native
+#: build, so that Warp finds the object that build made (``count``).
+ISA_VARIABLE = "WARPSIM_COUNTED_ISA"
+
 #: The counted process: builds, waits, steps ``F`` frames while counted, then hashes its state.
 CHILD = r"""
-import ctypes, hashlib, inspect, json, sys
+import ctypes, hashlib, inspect, json, os, sys
 import numpy as np
 import warp as wp
 wp.config.quiet = True
 import warpsim as ws
 prec, motion, frames, broad_phase, data, flags = sys.argv[1:7]
 frames = int(frames)
+# Warp keys a CPU object by the ISA features it sees, and valgrind's CPU shows fewer than the
+# machine's: given the native build's features, this process loads the object that build made
+try:
+    from warp._src import context as warp_context
+except ImportError:
+    warp_context = None
+isa = os.environ.get("WARPSIM_COUNTED_ISA", "")
+if isa and hasattr(warp_context, "_cpu_feature_set_cache"):
+    warp_context._cpu_feature_set_cache = frozenset(isa.split(","))
 if flags:  # line tables, for --where
     wp.config.cpu_compiler_flags = (wp.config.cpu_compiler_flags or "") + flags
 d = np.load(data)
@@ -89,6 +103,8 @@ if kernel is not None:  # where the kernel's code is, for --where
     forward = exe.get_kernel_hooks(kernel).forward
     where = {"address": ctypes.cast(forward, ctypes.c_void_p).value,
              "object": str(exe.binary_path), "kernel_file": inspect.getsourcefile(kernel.func)}
+if hasattr(warp_context, "_get_cpu_feature_set"):
+    where["isa"] = ",".join(sorted(warp_context._get_cpu_feature_set()))
 print(json.dumps(where), flush=True)
 sys.stdin.readline()
 sim.step(frames)
@@ -150,14 +166,18 @@ def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: s
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = str(site)
+    args = [sys.executable, "-c", CHILD, prec, motion, str(frames), broad_phase, data,
+            LINE_TABLES if where else ""]
     with tempfile.TemporaryDirectory() as tmp:
+        native = native_build(args, env, tmp)
+        if native.get("isa"):
+            env[ISA_VARIABLE] = native["isa"]
         dump = ["--dump-instr=yes", "--dump-line=no", "--compress-pos=no",
                 "--compress-strings=no"] if where else []
         child = subprocess.Popen(
             ["valgrind", "--tool=callgrind", "--instr-atstart=no", "--branch-sim=yes",
              "--toggle-collect=ffi_call*", *dump,
-             f"--callgrind-out-file={tmp}/callgrind.out", sys.executable, "-c", CHILD, prec,
-             motion, str(frames), broad_phase, data, LINE_TABLES if where else ""],
+             f"--callgrind-out-file={tmp}/callgrind.out", *args],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             env=env, cwd=tmp)
         try:
@@ -189,9 +209,28 @@ def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: s
     if site is not None and not result["file"].startswith(str(site)):
         raise RuntimeError(f"the revision's process imported {result['file']}")
     result.update({EVENTS[k]: v for k, v in counted.items() if k in EVENTS})
+    result["native_object"] = bool(native.get("object")) and located.get("object") == native[
+        "object"]
     if where:
         result["statements"] = statements if located else []
     return result
+
+
+def native_build(args: list[str], env: dict, cwd: str) -> dict:
+    """Runs the counted process's script (``args``) outside valgrind up to its first frame,
+    which builds the case's kernel into Warp's cache (seconds; inside valgrind the same build
+    takes a minute or more), and returns what it says of the kernel: its object and the ISA
+    features Warp keyed it by (``{}`` when it said nothing). Given those features
+    (``ISA_VARIABLE``), the counted process loads that object: the code this machine runs,
+    not one built for the fewer features valgrind's CPU shows."""
+    child = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             stderr=subprocess.DEVNULL, text=True, env=env, cwd=cwd)
+    try:
+        line = child.stdout.readline()
+    finally:
+        child.kill()
+        child.communicate()
+    return json.loads(line) if line.startswith("{") else {}
 
 
 def statement_events(text: str, located: dict) -> list[dict]:

@@ -32,14 +32,3 @@ def precision(request):
 @pytest.fixture
 def tol(precision):
     return TOLERANCES[precision]
-
-
-#: Modules whose import alone is slow (they build every kernel variant while being collected):
-#: the fast tier (``-m "not slow"``) does not collect them; the full suite does.
-SLOW_TO_COLLECT = {"test_kernel_variants.py"}
-
-
-def pytest_ignore_collect(collection_path, config):
-    if collection_path.name in SLOW_TO_COLLECT and config.getoption("markexpr") == "not slow":
-        return True
-    return None

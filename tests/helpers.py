@@ -74,14 +74,15 @@ def shaped_half_extents(rng, kind: str, low: float, high: float) -> np.ndarray:
 FLAGS = (False, True)
 
 
-def every_kernel_variant() -> list[tuple[str, object]]:
-    """``(label, kernel)`` for every kernel every factory can return: the collide kernel per
-    precision x motion x broad phase, the bounce kernel also over ``spin`` x ``lossy``, the
-    frame kernel also over ``energy_correction`` x ``events``, once with births (spin and
-    events on) and, ballistic, once under gravity (``falls``). Making a kernel object compiles
-    nothing (that happens at its first launch), so the whole product is cheap to enumerate.
-    The labels read ``factory/precision/motion/broad phase[/spin/lossy[/correction/events]]``
-    (``.../births`` and ``.../falls`` for those variants).
+def kernel_variant_specs() -> list[tuple[str, object, object]]:
+    """``(label, factory, features)`` for every kernel every factory can return, without making
+    any: the collide kernel per precision x motion x broad phase, the bounce kernel also over
+    ``spin`` x ``lossy``, the frame kernel also over ``energy_correction`` x ``events``, once
+    with births (spin and events on) and, ballistic, once under gravity (``falls``). The labels
+    read ``factory/precision/motion/broad phase[/spin/lossy[/correction/events]]``
+    (``.../births`` and ``.../falls`` for those variants). ``factory(features)`` makes the
+    kernel object: it compiles nothing (that happens at its first launch), but Warp hashes the
+    kernel's code to name its module, about 0.1 s a variant.
     """
     from warpsim.kernels.collide_kernels import bounce_kernel, collide_kernel
     from warpsim.kernels.data import BROAD_PHASES, MOTIONS, PRECISIONS, Features
@@ -90,19 +91,24 @@ def every_kernel_variant() -> list[tuple[str, object]]:
     out = []
     for p, m, b in itertools.product(PRECISIONS, MOTIONS, BROAD_PHASES):
         f = Features(precision=p, motion=m, broad_phase=b)
-        out.append((f"collide/{p}/{m}/{b}", collide_kernel(f)))
+        out.append((f"collide/{p}/{m}/{b}", collide_kernel, f))
         for spin, lossy in itertools.product(FLAGS, FLAGS):
-            out.append((f"bounce/{p}/{m}/{b}/{spin}/{lossy}",
-                        bounce_kernel(f.but(spin=spin, lossy=lossy))))
+            out.append((f"bounce/{p}/{m}/{b}/{spin}/{lossy}", bounce_kernel,
+                        f.but(spin=spin, lossy=lossy)))
             for corr, events in itertools.product(FLAGS, FLAGS):
-                out.append((f"frame/{p}/{m}/{b}/{spin}/{lossy}/{corr}/{events}",
-                            frame_kernel(f.but(spin=spin, lossy=lossy, energy_correction=corr,
-                                               events=events))))
-        out.append((f"frame/{p}/{m}/{b}/births",
-                    frame_kernel(f.but(spin=True, events=True, births=True))))
+                out.append((f"frame/{p}/{m}/{b}/{spin}/{lossy}/{corr}/{events}", frame_kernel,
+                            f.but(spin=spin, lossy=lossy, energy_correction=corr,
+                                  events=events)))
+        out.append((f"frame/{p}/{m}/{b}/births", frame_kernel,
+                    f.but(spin=True, events=True, births=True)))
         if m == "ballistic":
-            out.append((f"frame/{p}/{m}/{b}/falls", frame_kernel(f.but(falls=True))))
+            out.append((f"frame/{p}/{m}/{b}/falls", frame_kernel, f.but(falls=True)))
     return out
+
+
+def every_kernel_variant() -> list[tuple[str, object]]:
+    """``(label, kernel)`` for every kernel of :func:`kernel_variant_specs`."""
+    return [(label, factory(features)) for label, factory, features in kernel_variant_specs()]
 
 
 

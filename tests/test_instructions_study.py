@@ -49,8 +49,9 @@ def test_callgrind_counts_the_frames_and_only_them(tmp_path):
     sphere-sphere contacts) costs twice the instructions and branches, to 1 %: what the
     count holds besides the spheres' frames (the build, the start-up, the launch from Python)
     is under 1 % of it; the simulated mispredictions nearly double (the predictor has seen
-    the copies' branch patterns before, so to 10 %); and the counted run ends in the state of
-    the same frames run without valgrind."""
+    the copies' branch patterns before, so to 10 %); the counted run ends in the state of the
+    same frames run without valgrind; and it ran the object the build outside valgrind made
+    (the code this machine runs, and no build of a minute or more inside valgrind)."""
     path = study.save_case("room", 300, 5.0, tmp_path)
     d = dict(np.load(path))
     doubled = {k: (np.concatenate([v, v]) if k in ("position", "velocity", "radius", "mass")
@@ -62,6 +63,7 @@ def test_callgrind_counts_the_frames_and_only_them(tmp_path):
     for key in ("instructions", "branches"):
         assert two[key] / one[key] == pytest.approx(2.0, rel=0.01), key
     assert two["mispredicted"] / one["mispredicted"] == pytest.approx(2.0, rel=0.1)
+    assert one["native_object"] and two["native_object"]
     assert one["instructions"] > 100 * 300 * 10  # at least 100 instructions a sphere-frame
     assert 0 < one["mispredicted"] < one["branches"] < one["instructions"]
     scene, swarm = scene_from_saved(path)

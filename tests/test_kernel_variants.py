@@ -1,13 +1,15 @@
 """Every kernel every factory can return: no backward code, and arguments found by name.
 
-The factories are enumerated over all their feature flags (``helpers.every_kernel_variant``,
+The factories are enumerated over all their feature flags (``helpers.kernel_variant_specs``,
 the enumeration the ahead-of-time GPU build also uses); a kernel object is cheap to make (no
-compile happens until a launch), so the whole product is checked.
+compile happens until a launch), so the whole product is checked. Each variant is made in its
+own test, not while the module is collected: every test process collects the whole suite, and
+the 540 variants took about 45 s to make (Warp hashes each one's code).
 """
 
 import numpy as np
 import pytest
-from helpers import every_kernel_variant
+from helpers import kernel_variant_specs
 
 import warpsim as ws
 from warpsim.kernels.collide_kernels import collide_kernel
@@ -22,22 +24,25 @@ from warpsim.model import (
     parameter_names,
 )
 
-KERNELS = every_kernel_variant()
+SPECS = {label: (factory, features) for label, factory, features in kernel_variant_specs()}
 
 
-@pytest.mark.parametrize("label,kernel", KERNELS, ids=[k[0] for k in KERNELS])
-def test_no_backward_code(label, kernel):
+@pytest.mark.slow
+@pytest.mark.parametrize("label", list(SPECS))
+def test_kernel_variant(label):
+    """The variant's kernel and module carry no backward code; its module is built at level 2
+    on every device, not Warp's GPU default of 3 (a 246 s first build of the ballistic kernel
+    on an H200 against 2.9 s, at the same speed); and every parameter is a model field, a
+    sphere constant, ``<state field>_in`` or an output ending in ``_out``, so the launch helper
+    finds each by name, never by position."""
+    factory, features = SPECS[label]
+    kernel = factory(features)
     for key, value in KERNEL_OPTIONS.items():
         assert kernel.options.get(key) is value, label
         assert kernel.module.options.get(key) is value, label
-
-
-@pytest.mark.parametrize("label,kernel", KERNELS, ids=[k[0] for k in KERNELS])
-def test_optimisation_level(label, kernel):
-    """Every module is built at level 2 on every device, not Warp's GPU default of 3 (a 246 s
-    first build of the ballistic kernel on an H200 against 2.9 s, at the same speed)."""
     assert OPTIMIZATION_LEVEL == 2
     assert kernel.module.options.get("optimization_level") == OPTIMIZATION_LEVEL, label
+    assert_parameters_are_fields(label, kernel)
 
 
 def model_fields() -> set[str]:
@@ -62,10 +67,9 @@ LAUNCH_VALUES = {"frame_count", "record_every", "sphere_offset", "first_frame"}
 EVENT_OUTPUTS = {"events_out"}
 
 
-@pytest.mark.parametrize("label,kernel", KERNELS, ids=[k[0] for k in KERNELS])
-def test_parameter_names_are_fields(label, kernel):
-    """Every parameter is a model field, a sphere constant, ``<state field>_in`` or an output
-    ending in ``_out``: the launch helper finds each by name, never by position."""
+def assert_parameters_are_fields(label, kernel):
+    """Every parameter of ``kernel`` is a model field, a sphere constant, ``<state field>_in`` or
+    an output ending in ``_out``."""
     sphere_fields = set(Spheres.__dataclass_fields__)
     outputs = COLLIDE_OUTPUTS | BOUNCE_OUTPUTS | FRAME_COUNTERS | EVENT_OUTPUTS
     for name in parameter_names(kernel):
