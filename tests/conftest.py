@@ -8,6 +8,9 @@ catches does not vary between runs or machines; ``wide`` draws fresh random exam
 ``helpers.examples``, for a search on demand (``HYPOTHESIS_PROFILE=wide python -m pytest``).
 """
 
+import fcntl
+import os
+
 import pytest
 from helpers import DEVICES, HYPOTHESIS_PROFILE, TOLERANCES
 from hypothesis import settings
@@ -32,3 +35,37 @@ def precision(request):
 @pytest.fixture
 def tol(precision):
     return TOLERANCES[precision]
+
+
+def build_each_module_once():
+    """Test processes (pytest-xdist's workers) share Warp's kernel cache on disk, but nothing
+    stops two of them from building the same kernel variant at the same time, each for several
+    seconds. Here a process takes a lock file named for the module (in the cache directory)
+    around its first load of each module, so a second process waits for the first's build and
+    loads it from the cache. Warp's module class is internal: without it, nothing changes."""
+    try:
+        from warp._src.context import Module
+    except ImportError:
+        return
+    original = Module.load
+    passed = set()
+
+    def load(self, device, *args, **kwargs):
+        import warp as wp
+
+        if id(self) in passed or not wp.config.kernel_cache_dir:
+            return original(self, device, *args, **kwargs)
+        folder = os.path.join(wp.config.kernel_cache_dir, "build-locks")
+        os.makedirs(folder, exist_ok=True)
+        with open(os.path.join(folder, self.get_module_identifier() + ".lock"), "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                return original(self, device, *args, **kwargs)
+            finally:
+                passed.add(id(self))
+
+    Module.load = load
+
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    build_each_module_once()
