@@ -111,7 +111,6 @@ def every_kernel_variant() -> list[tuple[str, object]]:
     return [(label, factory(features)) for label, factory, features in kernel_variant_specs()]
 
 
-
 def exact_entry(start, motion, center, radius) -> tuple[bool, float]:
     """The exact first entry of ``start + t motion``, ``t`` in [0, 1], into the ball of
     ``radius`` about ``center`` (or, given the components across a cylinder's axis, into the

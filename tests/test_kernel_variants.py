@@ -1,10 +1,10 @@
 """Every kernel every factory can return: no backward code, and arguments found by name.
 
 The factories are enumerated over all their feature flags (``helpers.kernel_variant_specs``,
-the enumeration the ahead-of-time GPU build also uses); a kernel object is cheap to make (no
-compile happens until a launch), so the whole product is checked. Each variant is made in its
-own test, not while the module is collected: every test process collects the whole suite, and
-the 540 variants took about 45 s to make (Warp hashes each one's code).
+the enumeration the ahead-of-time GPU build also uses); making a kernel object compiles nothing
+(that happens at a launch), so the whole product is checked. Each variant is made in its own
+test, not while the module is collected: every test process collects the whole suite, and
+making the 540 variants took about 45 s (Warp hashes each one's code to name its module).
 """
 
 import numpy as np
