@@ -159,7 +159,7 @@ def ballistic_funcs(features: Features) -> SimpleNamespace:
         out = int(0)
         if gn < -TANGENT_REL * wp.length(g):
             limit = RESTING
-            if big_r < TWO * separation_bound(a, leg, extent):  # else above twice the lift
+            if big_r < TWO * separation_bound(a, leg, extent):  # else at or above twice the lift
                 lift = separation_lift(a, leg, extent)
                 if big_r < TWO * lift:
                     limit = wp.max(limit, wp.sqrt(EIGHT * -gn * lift))
