@@ -3,7 +3,8 @@ counted by valgrind's callgrind: the same figures on every run, where timings on
 machine move by 5 to 10 % (``benchmarks.hot_loop``'s spread column).
 
 Run from the repository root: ``python -m benchmarks.instructions [--against REV] [--cases
-float32/linear,...] [--speeds 5,60] [--scene room] [--broad-phase auto] [--quick]``. Needs
+float32/linear,...] [--speeds 5,60] [--scene room] [--broad-phase auto] [--memory] [--where N]
+[--quick]``. Needs
 valgrind (Debian's ``valgrind`` package: ``valgrind`` and ``callgrind_control``).
 
 Each case's kernel is first built outside valgrind (:func:`native_build`), then the case
@@ -25,6 +26,11 @@ side by side, from the same swarm (the scene's emitter drawn by this checkout an
 arrays, with the scene's boxes and physics), and says whether the two final states are the
 same bits. With two ``--speeds``, each side's figures at the last speed against the first
 are printed too (issue 20: 60 m/s against 5 m/s).
+
+``--memory`` has callgrind simulate the caches too (``--cache-sim=yes``: its model of a
+first- and a last-level cache, sized as the CPU reports them) and adds each case's data reads
+and writes and the simulated first- and last-level misses per sphere-frame: what a change did
+to the frame's memory traffic, such as stores to the stack.
 
 ``--where N`` builds the kernel with line tables (``frame_profile``'s, which leave the code
 as it was: the totals do not change) and has callgrind keep its counts per instruction; each
@@ -62,6 +68,16 @@ from .hot_loop import CASES, export_tree, save_arrays
 #: The events callgrind counts with ``--branch-sim=yes``, in the order of its summary line.
 EVENTS = {"Ir": "instructions", "Bc": "branches", "Bcm": "mispredicted",
           "Bi": "indirect", "Bim": "indirect_mispredicted"}
+
+#: The events ``--cache-sim=yes`` adds (``--memory``): data reads and writes, and the misses
+#: of callgrind's simulated first-level data cache and last-level cache.
+MEMORY_EVENTS = {"Dr": "data_reads", "Dw": "data_writes", "D1mr": "l1_read_misses",
+                 "D1mw": "l1_write_misses", "DLmr": "ll_read_misses", "DLmw": "ll_write_misses",
+                 "I1mr": "l1_instruction_misses", "ILmr": "ll_instruction_misses"}
+
+#: The per-sphere-frame figures ``--memory`` adds to each row.
+MEMORY_FIGURES = ("data_reads", "data_writes", "l1_read_misses", "l1_write_misses",
+                  "ll_read_misses", "ll_write_misses")
 
 #: The environment variable that gives the counted process the ISA features of the native
 #: build, so that Warp finds the object that build made (``count``).
@@ -158,11 +174,14 @@ def save_case(scene_name: str, n: int, speed: float | None, folder: Path) -> str
 
 
 def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: str,
-          data: str, where: bool = False) -> dict:
+          data: str, where: bool = False, memory: bool = False) -> dict:
     """One process's counted events (totals) and its state's hash; ``site`` None is this
     checkout's installed package. With ``where``, the kernel is built with line tables and
-    ``statements`` holds the events of each Python statement of it (:func:`statement_events`).
+    ``statements`` holds the events of each Python statement of it (:func:`statement_events`);
+    with ``memory``, callgrind also simulates the caches (``MEMORY_EVENTS``).
     """
+    if where and memory:
+        raise ValueError("count: where and memory cannot be combined")
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = str(site)
@@ -176,7 +195,7 @@ def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: s
                 "--compress-strings=no"] if where else []
         child = subprocess.Popen(
             ["valgrind", "--tool=callgrind", "--instr-atstart=no", "--branch-sim=yes",
-             "--toggle-collect=ffi_call*", *dump,
+             *(["--cache-sim=yes"] if memory else []), "--toggle-collect=ffi_call*", *dump,
              f"--callgrind-out-file={tmp}/callgrind.out", *args],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
             env=env, cwd=tmp)
@@ -200,20 +219,31 @@ def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: s
         finally:
             if child.poll() is None:
                 child.kill()
-    names = re.search(r"Events\s*:\s*([A-Za-z ]+)\n", err)
-    values = re.search(r"Collected\s*:\s*([\d ]+)\n", err)
-    if child.returncode != 0 or names is None or values is None:
+    counted = summary(err) if child.returncode == 0 else None
+    if counted is None:
         raise RuntimeError(f"callgrind gave no counts (exit {child.returncode}): {err[-500:]}")
-    counted = dict(zip(names.group(1).split(), map(int, values.group(1).split()), strict=True))
     result = json.loads(out.strip().splitlines()[-1])
     if site is not None and not result["file"].startswith(str(site)):
         raise RuntimeError(f"the revision's process imported {result['file']}")
-    result.update({EVENTS[k]: v for k, v in counted.items() if k in EVENTS})
+    result.update(counted)
     result["native_object"] = bool(native.get("object")) and located.get("object") == native[
         "object"]
     if where:
         result["statements"] = statements if located else []
     return result
+
+
+def summary(err: str) -> dict | None:
+    """The totals of callgrind's closing summary (its ``Events :`` and ``Collected :`` lines, in
+    the standard error), named as in ``EVENTS`` and ``MEMORY_EVENTS`` (events of neither are
+    left out); None when there is no summary."""
+    names = re.search(r"Events\s*:\s*([A-Za-z0-9 ]+)\n", err)
+    values = re.search(r"Collected\s*:\s*([\d ]+)\n", err)
+    if names is None or values is None:
+        return None
+    known = {**EVENTS, **MEMORY_EVENTS}
+    counted = dict(zip(names.group(1).split(), map(int, values.group(1).split()), strict=True))
+    return {known[k]: v for k, v in counted.items() if k in known}
 
 
 def native_build(args: list[str], env: dict, cwd: str) -> dict:
@@ -287,7 +317,12 @@ def main(argv=None) -> None:
     p.add_argument("--where", type=int, default=0, metavar="N",
                    help="also list, per case and side, the N statements of the kernel with "
                         "the most mispredicted branches (built with line tables)")
+    p.add_argument("--memory", action="store_true",
+                   help="also simulate the caches: data reads and writes and the first- and "
+                        "last-level misses per sphere-frame (not with --where)")
     args = p.parse_args(argv)
+    if args.memory and args.where:
+        sys.exit("benchmarks.instructions: --memory and --where cannot be combined")
     if args.device != "cpu":
         sys.exit("benchmarks.instructions counts the CPU kernel: --device must be cpu")
     need_valgrind()
@@ -311,7 +346,7 @@ def main(argv=None) -> None:
                 hashes = {}
                 for side, where in sides:
                     r = count(where, prec, motion, frames, args.broad_phase, data,
-                              where=args.where > 0)
+                              where=args.where > 0, memory=args.memory)
                     hashes[side] = r["hash"]
                     if args.where:
                         row[f"{side}_statements"] = [
@@ -319,7 +354,8 @@ def main(argv=None) -> None:
                                       for k in ("instructions", "branches", "mispredicted")}}
                             for st in r["statements"]]
                     row["broad_phase"] = r["broad_phase"]
-                    for key in ("instructions", "branches", "mispredicted"):
+                    for key in ("instructions", "branches", "mispredicted",
+                                *(MEMORY_FIGURES if args.memory else ())):
                         row[f"{side}_{key}"] = r[key] / (n * frames)
                 if rev:
                     row["ratio"] = row["this_instructions"] / row["base_instructions"]
@@ -335,6 +371,13 @@ def main(argv=None) -> None:
         columns += [(f"{name} instructions", f"{side}_instructions", ".1f"),
                     (f"{name} branches", f"{side}_branches", ".2f"),
                     (f"{name} mispredicted", f"{side}_mispredicted", ".3f")]
+        if args.memory:
+            columns += [(f"{name} data reads", f"{side}_data_reads", ".1f"),
+                        (f"{name} data writes", f"{side}_data_writes", ".1f"),
+                        (f"{name} L1 read misses", f"{side}_l1_read_misses", ".3f"),
+                        (f"{name} L1 write misses", f"{side}_l1_write_misses", ".3f"),
+                        (f"{name} LL read misses", f"{side}_ll_read_misses", ".3f"),
+                        (f"{name} LL write misses", f"{side}_ll_write_misses", ".3f")]
     if rev:
         columns += [("ratio", "ratio", ".3f"), ("identical", "identical", "s")]
     print_table(f"Frame kernel under callgrind, scene {args.scene}, N = {n:,}, F = {frames}, "

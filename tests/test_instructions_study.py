@@ -41,6 +41,27 @@ def test_the_saved_case_advances_as_the_bundled_scene(name, tmp_path):
         assert np.allclose(np.linalg.norm(swarm.velocity, axis=1), 7.0)
 
 
+def test_the_summary_names_every_event_and_only_known_ones():
+    """callgrind's closing summary, with and without the cache simulation (event names with
+    digits), read into the study's names; other events are left out, no summary is None."""
+    branch = ("==1== Events    : Ir Bc Bcm Bi Bim\n==1== Collected : 1000 200 30 4 1\n"
+              "==1==\n==1== I refs: 1,000\n")
+    assert study.summary(branch) == {"instructions": 1000, "branches": 200, "mispredicted": 30,
+                                     "indirect": 4, "indirect_mispredicted": 1}
+    cache = ("==7== Events    : Ir Dr Dw I1mr D1mr D1mw ILmr DLmr DLmw Bc Bcm Bi Bim Ge\n"
+             "==7== Collected : 900 300 120 2 5 6 1 3 4 150 20 2 0 7\n")
+    got = study.summary(cache)
+    assert got == {"instructions": 900, "data_reads": 300, "data_writes": 120,
+                   "l1_instruction_misses": 2, "l1_read_misses": 5, "l1_write_misses": 6,
+                   "ll_instruction_misses": 1, "ll_read_misses": 3, "ll_write_misses": 4,
+                   "branches": 150, "mispredicted": 20, "indirect": 2,
+                   "indirect_mispredicted": 0}
+    assert set(study.MEMORY_FIGURES) <= set(got)
+    assert study.summary("==1== no summary here\n") is None
+    with pytest.raises(ValueError, match="cannot be combined"):
+        study.count(None, "float32", "linear", 1, "auto", "unused.npz", where=True, memory=True)
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("valgrind") is None or shutil.which("callgrind_control") is None,
                     reason="valgrind is not installed (Debian's valgrind package)")
