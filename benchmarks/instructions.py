@@ -178,10 +178,9 @@ def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: s
     """One process's counted events (totals) and its state's hash; ``site`` None is this
     checkout's installed package. With ``where``, the kernel is built with line tables and
     ``statements`` holds the events of each Python statement of it (:func:`statement_events`);
-    with ``memory``, callgrind also simulates the caches (``MEMORY_EVENTS``).
+    with ``memory``, callgrind also simulates the caches (``MEMORY_EVENTS``), and the
+    statements hold their data reads and writes too.
     """
-    if where and memory:
-        raise ValueError("count: where and memory cannot be combined")
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = str(site)
@@ -267,10 +266,13 @@ def statement_events(text: str, located: dict) -> list[dict]:
     """The events of a callgrind dump (``--dump-instr=yes``, uncompressed) at the kernel's
     instructions, summed per Python statement of the kernel (``frame_profile``'s mapping:
     the object's line tables, then the generated C++'s statement comments); the events of a
-    call site's callee (the line after ``calls=``) are the callee's, not counted there."""
+    call site's callee (the line after ``calls=``) are the callee's, not counted there. The
+    data reads and writes are 0 unless callgrind simulated the caches (``--memory``)."""
     obj = Path(located["object"])
     base = located["address"] - forward_offset(obj)
-    names, per_offset, after_call = [], collections.defaultdict(lambda: [0, 0, 0]), False
+    kept = ("Ir", "Bc", "Bcm", "Dr", "Dw")
+    names, after_call = [], False
+    per_offset = collections.defaultdict(lambda: [0] * len(kept))
     for line in text.splitlines():
         if line.startswith("events:"):
             names = line.split()[1:]
@@ -285,21 +287,21 @@ def statement_events(text: str, located: dict) -> list[dict]:
             if 0 <= offset < 1 << 24:
                 got = dict(zip(names, map(int, values), strict=False))
                 cost = per_offset[offset]
-                for i, key in enumerate(("Ir", "Bc", "Bcm")):
+                for i, key in enumerate(kept):
                     cost[i] += got.get(key, 0)
     lines = innermost_cpp_lines(obj, sorted(per_offset))
     cpp = next(obj.parent.glob("*.cpp")).read_text(encoding="utf-8")
     statements = generated_statements(cpp, located["kernel_file"])
-    by: dict[tuple, list[int]] = collections.defaultdict(lambda: [0, 0, 0])
+    by: dict[tuple, list[int]] = collections.defaultdict(lambda: [0] * len(kept))
     for offset, cost in per_offset.items():
         line = lines.get(offset)
         s = statement_at(statements, line) if line is not None else None
         key = (Path(s.file).name, s.line, s.text) if s else ("?", 0, "(no line)")
-        for i in range(3):
+        for i in range(len(kept)):
             by[key][i] += cost[i]
     return [{"file": f, "line": ln, "text": t, "instructions": c[0], "branches": c[1],
-             "mispredicted": c[2]} for (f, ln, t), c in sorted(by.items(), key=lambda kv:
-                                                               -kv[1][2])]
+             "mispredicted": c[2], "data_reads": c[3], "data_writes": c[4]}
+            for (f, ln, t), c in sorted(by.items(), key=lambda kv: -kv[1][2])]
 
 
 def main(argv=None) -> None:
@@ -319,10 +321,8 @@ def main(argv=None) -> None:
                         "the most mispredicted branches (built with line tables)")
     p.add_argument("--memory", action="store_true",
                    help="also simulate the caches: data reads and writes and the first- and "
-                        "last-level misses per sphere-frame (not with --where)")
+                        "last-level misses per sphere-frame (with --where, per statement too)")
     args = p.parse_args(argv)
-    if args.memory and args.where:
-        sys.exit("benchmarks.instructions: --memory and --where cannot be combined")
     if args.device != "cpu":
         sys.exit("benchmarks.instructions counts the CPU kernel: --device must be cpu")
     need_valgrind()
@@ -351,7 +351,8 @@ def main(argv=None) -> None:
                     if args.where:
                         row[f"{side}_statements"] = [
                             {**st, **{k: st[k] / (n * frames)
-                                      for k in ("instructions", "branches", "mispredicted")}}
+                                      for k in ("instructions", "branches", "mispredicted",
+                                                "data_reads", "data_writes")}}
                             for st in r["statements"]]
                     row["broad_phase"] = r["broad_phase"]
                     for key in ("instructions", "branches", "mispredicted",
@@ -392,6 +393,7 @@ def main(argv=None) -> None:
                         [("mispredicted", "mispredicted", ".3f"),
                          ("branches", "branches", ".2f"),
                          ("instructions", "instructions", ".1f"),
+                         *([("data writes", "data_writes", ".2f")] if args.memory else []),
                          ("file", "file", "s"), ("line", "line", ""), ("statement", "text", "s")])
     speed_ratios = {}
     if len(speeds) > 1:

@@ -58,8 +58,6 @@ def test_the_summary_names_every_event_and_only_known_ones():
                    "indirect_mispredicted": 0}
     assert set(study.MEMORY_FIGURES) <= set(got)
     assert study.summary("==1== no summary here\n") is None
-    with pytest.raises(ValueError, match="cannot be combined"):
-        study.count(None, "float32", "linear", 1, "auto", "unused.npz", where=True, memory=True)
 
 
 @pytest.mark.slow
@@ -103,12 +101,16 @@ def test_callgrind_counts_the_frames_and_only_them(tmp_path):
                     or shutil.which("addr2line") is None,
                     reason="valgrind or addr2line is not installed")
 def test_where_puts_the_counts_on_the_kernels_statements(tmp_path):
-    """``--where``: the kernel's statements hold all but a sliver of the counted instructions
-    (the rest is the launch's C++ around the kernel), the same totals as without line tables,
+    """``--where`` (with ``--memory``): the kernel's statements hold all but a sliver of the
+    counted instructions (the rest is the launch's C++ around the kernel), the same totals as
+    without line tables and the cache model, their data writes are some of the counted ones,
     and the cell list's loop is among the statements of a grid run."""
     path = study.save_case("room", 300, 60.0, tmp_path)
     plain = study.count(None, "float32", "linear", 10, "auto", path)
-    where = study.count(None, "float32", "linear", 10, "auto", path, where=True)
+    where = study.count(None, "float32", "linear", 10, "auto", path, where=True, memory=True)
+    writes = sum(s["data_writes"] for s in where["statements"])
+    assert 0 < writes <= where["data_writes"]
+    assert 0 < where["l1_read_misses"] <= where["data_reads"]
     assert where["instructions"] == pytest.approx(plain["instructions"], rel=1e-3)
     placed = sum(s["instructions"] for s in where["statements"] if s["file"] != "?")
     assert placed >= 0.97 * where["instructions"]
