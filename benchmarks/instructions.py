@@ -79,18 +79,14 @@ MEMORY_EVENTS = {"Dr": "data_reads", "Dw": "data_writes", "D1mr": "l1_read_misse
 MEMORY_FIGURES = ("data_reads", "data_writes", "l1_read_misses", "l1_write_misses",
                   "ll_read_misses", "ll_write_misses")
 
-#: The environment variable that gives the counted process the ISA features of the native
-#: build, so that Warp finds the object that build made (``count``).
-ISA_VARIABLE = "WARPSIM_COUNTED_ISA"
-
 #: The counted process: builds, waits, steps ``F`` frames while counted, then hashes its state.
 CHILD = r"""
-import ctypes, hashlib, inspect, json, os, sys
+import ctypes, hashlib, inspect, json, sys
 import numpy as np
 import warp as wp
 wp.config.quiet = True
 import warpsim as ws
-prec, motion, frames, broad_phase, data, flags = sys.argv[1:7]
+prec, motion, frames, broad_phase, data, flags, isa = sys.argv[1:8]
 frames = int(frames)
 # Warp keys a CPU object by the ISA features it sees, and valgrind's CPU shows fewer than the
 # machine's: given the native build's features, this process loads the object that build made
@@ -98,7 +94,6 @@ try:
     from warp._src import context as warp_context
 except ImportError:
     warp_context = None
-isa = os.environ.get("WARPSIM_COUNTED_ISA", "")
 if isa and hasattr(warp_context, "_cpu_feature_set_cache"):
     warp_context._cpu_feature_set_cache = frozenset(isa.split(","))
 if flags:  # line tables, for --where
@@ -187,9 +182,8 @@ def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: s
     args = [sys.executable, "-c", CHILD, prec, motion, str(frames), broad_phase, data,
             LINE_TABLES if where else ""]
     with tempfile.TemporaryDirectory() as tmp:
-        native = native_build(args, env, tmp)
-        if native.get("isa"):
-            env[ISA_VARIABLE] = native["isa"]
+        native = native_build([*args, ""], env, tmp)
+        args.append(native.get("isa", ""))
         dump = ["--dump-instr=yes", "--dump-line=no", "--compress-pos=no",
                 "--compress-strings=no"] if where else []
         child = subprocess.Popen(
@@ -250,7 +244,7 @@ def native_build(args: list[str], env: dict, cwd: str) -> dict:
     which builds the case's kernel into Warp's cache (seconds; inside valgrind the same build
     takes a minute or more), and returns what it says of the kernel: its object and the ISA
     features Warp keyed it by (``{}`` when it said nothing). Given those features
-    (``ISA_VARIABLE``), the counted process loads that object: the code this machine runs,
+    (the counted process's last argument), it loads that object: the code this machine runs,
     not one built for the fewer features valgrind's CPU shows."""
     child = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                              stderr=subprocess.DEVNULL, text=True, env=env, cwd=cwd)

@@ -43,6 +43,8 @@ def build_each_module_once():
     seconds. Here a process takes a lock file named for the module (in the cache directory)
     around its first load of each module, so a second process waits for the first's build and
     loads it from the cache. Warp's module class is internal: without it, nothing changes."""
+    import warp as wp
+
     try:
         from warp._src.context import Module
     except ImportError:
@@ -51,8 +53,6 @@ def build_each_module_once():
     passed = set()
 
     def load(self, device, *args, **kwargs):
-        import warp as wp
-
         if id(self) in passed or not wp.config.kernel_cache_dir:
             return original(self, device, *args, **kwargs)
         folder = os.path.join(wp.config.kernel_cache_dir, "build-locks")
