@@ -37,6 +37,9 @@ as it was: the totals do not change) and has callgrind keep its counts per instr
 instruction of the kernel is mapped onto the Python statement whose generated code it is in,
 as ``frame_profile`` maps its samples, and the N statements with the most mispredicted
 branches are listed per case and side: where the branches that a fast swarm makes hard are.
+With it, the runs of the stack loads that wait for their stores (``benchmarks.store_forwarding``'s
+scan of the same object) are counted too, per statement and in all (``split-store loads`` per
+sphere-frame).
 """
 
 from __future__ import annotations
@@ -64,6 +67,7 @@ from .frame_profile import (
     statement_at,
 )
 from .hot_loop import CASES, export_tree, save_arrays
+from .store_forwarding import forward_disassembly, split_store_loads
 
 #: The events callgrind counts with ``--branch-sim=yes``, in the order of its summary line.
 EVENTS = {"Ir": "instructions", "Bc": "branches", "Bcm": "mispredicted",
@@ -286,15 +290,19 @@ def statement_events(text: str, located: dict) -> list[dict]:
     lines = innermost_cpp_lines(obj, sorted(per_offset))
     cpp = next(obj.parent.glob("*.cpp")).read_text(encoding="utf-8")
     statements = generated_statements(cpp, located["kernel_file"])
-    by: dict[tuple, list[int]] = collections.defaultdict(lambda: [0] * len(kept))
+    split = split_store_loads(forward_disassembly(obj))
+    by: dict[tuple, list[int]] = collections.defaultdict(lambda: [0] * (len(kept) + 1))
     for offset, cost in per_offset.items():
         line = lines.get(offset)
         s = statement_at(statements, line) if line is not None else None
         key = (Path(s.file).name, s.line, s.text) if s else ("?", 0, "(no line)")
         for i in range(len(kept)):
             by[key][i] += cost[i]
+        if offset in split:  # a load that waits for its stores: its runs
+            by[key][len(kept)] += cost[0]
     return [{"file": f, "line": ln, "text": t, "instructions": c[0], "branches": c[1],
-             "mispredicted": c[2], "data_reads": c[3], "data_writes": c[4]}
+             "mispredicted": c[2], "data_reads": c[3], "data_writes": c[4],
+             "split_loads": c[5]}
             for (f, ln, t), c in sorted(by.items(), key=lambda kv: -kv[1][2])]
 
 
@@ -346,8 +354,10 @@ def main(argv=None) -> None:
                         row[f"{side}_statements"] = [
                             {**st, **{k: st[k] / (n * frames)
                                       for k in ("instructions", "branches", "mispredicted",
-                                                "data_reads", "data_writes")}}
+                                                "data_reads", "data_writes", "split_loads")}}
                             for st in r["statements"]]
+                        row[f"{side}_split_loads"] = sum(
+                            st["split_loads"] for st in row[f"{side}_statements"])
                     row["broad_phase"] = r["broad_phase"]
                     for key in ("instructions", "branches", "mispredicted",
                                 *(MEMORY_FIGURES if args.memory else ())):
@@ -366,6 +376,8 @@ def main(argv=None) -> None:
         columns += [(f"{name} instructions", f"{side}_instructions", ".1f"),
                     (f"{name} branches", f"{side}_branches", ".2f"),
                     (f"{name} mispredicted", f"{side}_mispredicted", ".3f")]
+        if args.where:
+            columns += [(f"{name} split-store loads", f"{side}_split_loads", ".3f")]
         if args.memory:
             columns += [(f"{name} data reads", f"{side}_data_reads", ".1f"),
                         (f"{name} data writes", f"{side}_data_writes", ".1f"),
@@ -388,7 +400,17 @@ def main(argv=None) -> None:
                          ("branches", "branches", ".2f"),
                          ("instructions", "instructions", ".1f"),
                          *([("data writes", "data_writes", ".2f")] if args.memory else []),
+                         ("split-store loads", "split_loads", ".3f"),
                          ("file", "file", "s"), ("line", "line", ""), ("statement", "text", "s")])
+            split = [st for st in row[f"{side}_statements"] if st["split_loads"] > 0]
+            if split:
+                print_table(f"{name}, {row['precision']} {row['motion']}, {row['speed']} m/s: "
+                            "the statements whose stack loads wait for their stores "
+                            "(benchmarks.store_forwarding), runs per sphere-frame",
+                            sorted(split, key=lambda st: -st["split_loads"])[:args.where],
+                            [("split-store loads", "split_loads", ".3f"),
+                             ("file", "file", "s"), ("line", "line", ""),
+                             ("statement", "text", "s")])
     speed_ratios = {}
     if len(speeds) > 1:
         for prec, motion in cases:

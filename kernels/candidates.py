@@ -273,16 +273,14 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
         """The BVH query box of the path: the chord's bounding box grown by ``grow (1 +
         REJECT_SLACK)`` and padded (``BOUNDS_PAD_*``), in float32 rounded outward, so every box
         :func:`apart` lets through is a candidate."""
-        lower = wp.vec3f()
-        upper = wp.vec3f()
-        for i in range(3):
-            grow = q.grow[i] * SLACK
-            lo = wp.min(q.a[i], q.end[i]) - grow
-            hi = wp.max(q.a[i], q.end[i]) + grow
-            pad = PAD_REL * wp.max(wp.abs(lo), wp.abs(hi)) + PAD_ABS
-            lower[i] = wp.float32(lo - pad)
-            upper[i] = wp.float32(hi + pad)
-        return lower, upper
+        # whole vectors, not a component at a time: the query then stores each bound as the
+        # comparisons of its traversal load it (a bound stored a component at a time and
+        # loaded two at once stalls the load; the forced BVH's frame measured 1.2x slower)
+        grow = q.grow * SLACK
+        lo = wp.min(q.a, q.end) - grow
+        hi = wp.max(q.a, q.end) + grow
+        pad = PAD_REL * wp.max(wp.abs(lo), wp.abs(hi)) + vec3(PAD_ABS, PAD_ABS, PAD_ABS)
+        return wp.vec3f(lo - pad), wp.vec3f(hi + pad)
 
     return SimpleNamespace(apart=apart, apart_per_axis=apart_per_axis,
                            apart_branch_free=apart_branch_free, grid_fits_path=grid_fits_path,

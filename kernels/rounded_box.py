@@ -35,10 +35,30 @@ def rounded_box_funcs(p: Precision) -> SimpleNamespace:
     TANGENT_REL = scalar(p.tangent_rel)
 
     @wp.func
+    def with_axis_selected(v: vec3, i: int, x: scalar):
+        """``v`` with its component ``i`` (a run-time axis) replaced by ``x``, a select per
+        component: in registers."""
+        return vec3(wp.where(i == 0, x, v[0]), wp.where(i == 1, x, v[1]),
+                    wp.where(i == 2, x, v[2]))
+
+    @wp.func
+    def with_axis_indexed(v: vec3, i: int, x: scalar):
+        """:func:`with_axis_selected` by a write at the index: through memory."""
+        out = v
+        out[i] = x
+        return out
+
+    # The same vector either way. In float64 the write at a run-time index went through the
+    # stack and the vector was read back whole, waiting for that write (a store-forwarding
+    # stall: benchmarks.store_forwarding): the selects took 0.94 to 0.96x the linear frame. In
+    # float32 clang read it back without the wait, and the selects added 1.8 to 2.4 % to the
+    # linear frame's instructions (BENCHMARKS.md, "Loads that wait for stores").
+    with_axis = with_axis_selected if p.name == "float64" else with_axis_indexed
+
+    @wp.func
     def unit_axis(i: int, sign: scalar):
-        v = vec3(ZERO, ZERO, ZERO)
-        v[i] = sign
-        return v
+        """``sign`` times the unit vector of axis ``i``."""
+        return with_axis(vec3(ZERO, ZERO, ZERO), i, sign)
 
     @wp.func
     def sign_of(x: scalar):
@@ -180,11 +200,9 @@ def rounded_box_funcs(p: Precision) -> SimpleNamespace:
                 for i in range(3):
                     if i != out_axis:
                         corner[i] = sign_of(pe[i]) * h[i]
-                e0 = corner
-                e1 = corner
-                e0[out_axis] = -h[out_axis]
-                e1[out_axis] = h[out_axis]
-                hit, t, normal = segment_capsule(a, d, e0, e1, radius)
+                e = h[out_axis]
+                hit, t, normal = segment_capsule(a, d, with_axis(corner, out_axis, -e),
+                                                 with_axis(corner, out_axis, e), radius)
             else:
                 corner = vec3(sign_of(pe[0]) * h[0], sign_of(pe[1]) * h[1],
                               sign_of(pe[2]) * h[2])

@@ -104,7 +104,8 @@ def test_where_puts_the_counts_on_the_kernels_statements(tmp_path):
     """``--where`` (with ``--memory``): the kernel's statements hold all but a sliver of the
     counted instructions (the rest is the launch's C++ around the kernel), the same totals as
     without line tables and the cache model, their data writes are some of the counted ones,
-    and the cell list's loop is among the statements of a grid run."""
+    the cell list's loop is among the statements of a grid run, and the runs of the loads
+    that wait for their stores are some of each statement's instructions."""
     path = study.save_case("room", 300, 60.0, tmp_path)
     plain = study.count(None, "float32", "linear", 10, "auto", path)
     where = study.count(None, "float32", "linear", 10, "auto", path, where=True, memory=True)
@@ -117,3 +118,5 @@ def test_where_puts_the_counts_on_the_kernels_statements(tmp_path):
     assert sum(s["mispredicted"] for s in where["statements"]) <= where["mispredicted"]
     assert any(s["file"] == "candidates.py" and "cell_start" in s["text"]
                for s in where["statements"])
+    # the runs of the loads that wait for their stores: some of the statement's instructions
+    assert all(0 <= s["split_loads"] <= s["instructions"] for s in where["statements"])
