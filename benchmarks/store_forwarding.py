@@ -1,15 +1,17 @@
 """Loads that wait for stores: the frame kernel's stack loads that read bytes written by more
-than one store (or by part of one) shortly before, in the same straight run of code.
+than one store (or by part of one) shortly before, on the same path through the code.
 
 An x86 core hands a load its bytes from a store still in its store buffer only when one store
 wrote all of them; a load that spans two stores (a vector written a component at a time and
-read whole, or written whole and read across its end) waits until those stores reach the cache,
-a stall of some ten to twenty cycles on the CPUs measured here (a store-forwarding failure).
-Clang makes such pairs where a vector goes through the stack: a component written at a run-time
-index, a struct built field by field and copied whole, a value passed by memory to an
-out-of-line function. The forced BVH's frame did one per query (its bounds written a component
-at a time, read two at once) and took 1.07x the time for it (BENCHMARKS.md, "Loads that wait
-for stores").
+read whole, or written whole and read across its end) waits until those stores reach the cache
+(a store-forwarding failure; what it costs depends on the CPU and on what else is in flight,
+and is not measured here). Clang makes such pairs where a vector goes through the stack: a
+component written at a run-time index, a struct built field by field and copied whole, a value
+passed by memory to an out-of-line function. The forced BVH's frame did one per query (its
+bounds written a component at a time, read two at once), and building them as whole vectors
+made it 0.91 to 0.94x; removing 1.2 such loads a sphere-frame from the float64 ballistic frame
+showed no gain beyond the noise (BENCHMARKS.md, "Loads that wait for stores"). A listed load
+is a place to look, not a cost.
 
 The scan reads the kernel's disassembly (``objdump``, AT&T syntax), the ``*_cpu_forward``
 function only, in the order it is laid out: a conditional jump's fall-through goes on with the
