@@ -274,8 +274,9 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
         REJECT_SLACK)`` and padded (``BOUNDS_PAD_*``), in float32 rounded outward, so every box
         :func:`apart` lets through is a candidate."""
         # whole vectors, not a component at a time: the query then stores each bound as the
-        # comparisons of its traversal load it (a bound stored a component at a time and
-        # loaded two at once stalls the load; the forced BVH's frame measured 1.2x slower)
+        # comparisons of its traversal load it (a bound stored a component at a time and read
+        # two components at once waits for both stores: the forced BVH's float32 frame took
+        # 1.07 to 1.10x the time so; BENCHMARKS.md, "Loads that wait for stores")
         grow = q.grow * SLACK
         lo = wp.min(q.a, q.end) - grow
         hi = wp.max(q.a, q.end) + grow

@@ -50,9 +50,9 @@ def rounded_box_funcs(p: Precision) -> SimpleNamespace:
 
     # The same vector either way. In float64 the write at a run-time index went through the
     # stack and the vector was read back whole, waiting for that write (a store-forwarding
-    # stall: benchmarks.store_forwarding): the selects took 0.94 to 0.96x the linear frame. In
-    # float32 clang read it back without the wait, and the selects added 1.8 to 2.4 % to the
-    # linear frame's instructions (BENCHMARKS.md, "Loads that wait for stores").
+    # stall: benchmarks.store_forwarding): the selects took 0.94 to 0.99x the float64 linear
+    # frame. In float32 clang read it back without the wait, and the selects added 1.8 to
+    # 2.4 % to the linear frame's instructions (BENCHMARKS.md, "Loads that wait for stores").
     with_axis = with_axis_selected if p.name == "float64" else with_axis_indexed
 
     @wp.func
