@@ -59,15 +59,9 @@ from pathlib import Path
 import numpy as np
 
 from .common import finish, parser, print_table, start
-from .frame_profile import (
-    LINE_TABLES,
-    forward_offset,
-    generated_statements,
-    innermost_cpp_lines,
-    statement_at,
-)
+from .frame_profile import LINE_TABLES, forward_offset
 from .hot_loop import CASES, export_tree, save_arrays
-from .store_forwarding import forward_disassembly, split_store_loads
+from .store_forwarding import forward_disassembly, split_store_loads, statements_of
 
 #: The events callgrind counts with ``--branch-sim=yes``, in the order of its summary line.
 EVENTS = {"Ir": "instructions", "Bc": "branches", "Bcm": "mispredicted",
@@ -287,15 +281,11 @@ def statement_events(text: str, located: dict) -> list[dict]:
                 cost = per_offset[offset]
                 for i, key in enumerate(kept):
                     cost[i] += got.get(key, 0)
-    lines = innermost_cpp_lines(obj, sorted(per_offset))
-    cpp = next(obj.parent.glob("*.cpp")).read_text(encoding="utf-8")
-    statements = generated_statements(cpp, located["kernel_file"])
+    where = statements_of(obj, list(per_offset), located["kernel_file"])
     split = split_store_loads(forward_disassembly(obj))
     by: dict[tuple, list[int]] = collections.defaultdict(lambda: [0] * (len(kept) + 1))
     for offset, cost in per_offset.items():
-        line = lines.get(offset)
-        s = statement_at(statements, line) if line is not None else None
-        key = (Path(s.file).name, s.line, s.text) if s else ("?", 0, "(no line)")
+        key = where[offset]
         for i in range(len(kept)):
             by[key][i] += cost[i]
         if offset in split:  # a load that waits for its stores: its runs

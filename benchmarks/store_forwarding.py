@@ -115,9 +115,11 @@ def forward_disassembly(obj: Path) -> list[tuple[int, str, str]]:
 
 def split_store_loads(code: list[tuple[int, str, str]], window: int = WINDOW) -> dict[int, dict]:
     """``{offset: {"load": text, "stores": [text, ...]}}``: each stack load of ``code`` (as
-    :func:`forward_disassembly` gives it) that overlaps an earlier store of the same straight
-    run, within ``window`` instructions, where the youngest overlapping store does not hold
-    all its bytes (the stores listed are the overlapping ones, oldest first)."""
+    :func:`forward_disassembly` gives it) that overlaps an earlier store on its fall-through
+    path (a conditional jump keeps the stores before it; an unconditional jump, a call, a
+    return or a change of the stack pointer forgets them), within ``window`` instructions,
+    where the youngest overlapping store does not hold all its bytes (the stores listed are
+    the overlapping ones, oldest first, the last four)."""
     found: dict[int, dict] = {}
     stores: list[tuple[int, int, int, str, str]] = []  # (index, start, size, base, text)
     for index, (offset, mnemonic, operands) in enumerate(code):
