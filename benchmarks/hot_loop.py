@@ -80,7 +80,9 @@ for _ in range(timings):
     sim.step(1)
     wp.synchronize_device("cpu")
     t0 = time.thread_time()
-    sim.step(frames)
+    per = int(sys.argv[10]) or frames  # frames a launch: every step() call is one launch here
+    for _ in range(frames // per):
+        sim.step(per)
     wp.synchronize_device("cpu")
     best = min(best, time.thread_time() - t0)
 s = sim.state()
@@ -135,15 +137,17 @@ def save_arrays(path: Path, boxes, swarm, **extra) -> str:
 
 def measure(site: Path | None, prec: str, motion: str, n: int, frames: int,
             timings: int, scene: str = "room", speed: float | None = None,
-            broad_phase: str = "auto") -> dict:
+            broad_phase: str = "auto", per_launch: int = 0) -> dict:
     """One process's best time; ``site`` None is this checkout's installed package; ``speed``
-    [m/s] replaces the emitter's (None: the scene's swarm); ``broad_phase`` the simulator's."""
+    [m/s] replaces the emitter's (None: the scene's swarm); ``broad_phase`` the simulator's;
+    ``per_launch`` the frames of each ``step`` call (0: all ``frames`` in one)."""
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = str(site)
     out = subprocess.run([sys.executable, "-c", CHILD, prec, motion, str(n), str(frames),
                           str(timings), scene, "" if speed is None else repr(float(speed)),
-                          str(Path(__file__).resolve().parent.parent), broad_phase],
+                          str(Path(__file__).resolve().parent.parent), broad_phase,
+                          str(per_launch)],
                          check=True, capture_output=True, text=True,
                          env=env, cwd=tempfile.gettempdir())
     result = json.loads(out.stdout.strip().splitlines()[-1])
@@ -167,6 +171,14 @@ def main(argv=None) -> None:
                         "last against the first is printed too")
     p.add_argument("--broad-phase", default="auto",
                    help="the simulators' broad_phase (default auto; bvh, brute, grid, walk)")
+    p.add_argument("--spheres", type=int, default=None,
+                   help="spheres N (default 20000; 5000 with --quick)")
+    p.add_argument("--frames", type=int, default=None,
+                   help="frames F timed (default 240; 60 with --quick)")
+    p.add_argument("--per-launch", type=int, default=0,
+                   help="frames each sim.step call advances, a divisor of F (default: all F in "
+                        "one call); 1 times a launch per frame, as a caller stepping frame by "
+                        "frame pays it")
     args = p.parse_args(argv)
     cases = CASES if args.cases is None else [tuple(c.split("/")) for c in args.cases.split(",")]
     speeds = [None] if args.speeds is None else [float(s) for s in args.speeds.split(",")]
@@ -174,6 +186,9 @@ def main(argv=None) -> None:
     started = time.perf_counter()
     _, info, out = start("hot_loop", args)
     n, frames = (5_000, 60) if args.quick else (20_000, 240)
+    n, frames = args.spheres or n, args.frames or frames
+    if args.per_launch < 0 or (args.per_launch and frames % args.per_launch):
+        p.error(f"--per-launch must divide the {frames} frames")
     repeats = args.repeats or (2 if args.quick else 5)
     rev = subprocess.run(["git", "rev-parse", "--short", args.against], check=True,
                          capture_output=True, text=True).stdout.strip()
@@ -189,7 +204,7 @@ def main(argv=None) -> None:
             for _ in range(repeats):
                 for side, where in (("base", site), ("this", None)):
                     r = measure(where, prec, motion, n, frames, 3, scene, speed,
-                                args.broad_phase)
+                                args.broad_phase, args.per_launch)
                     turns[side].append(r["seconds"])
                     hashes[side] = r["hash"]
             best = {k: min(v) for k, v in turns.items()}
@@ -207,7 +222,9 @@ def main(argv=None) -> None:
             print(f"  {prec} {motion} {speed or ''}: {ns['base']:.2f} -> {ns['this']:.2f} ns",
                   flush=True)
     print_table(f"Frame kernel, scene {args.scene}, N = {n:,}, F = {frames}, one core, best of "
-                f"{repeats} x 3: {rev} against this checkout",
+                f"{repeats} x 3"
+                + (f", {args.per_launch} frames a launch" if args.per_launch else "")
+                + f": {rev} against this checkout",
                 rows, [("precision", "precision", "s"), ("motion", "motion", "s"),
                        ("m/s", "speed", ""), ("broad phase", "broad_phase", "s"),
                        (f"{rev} [ns]", "base_ns", ".2f"), ("this [ns]", "this_ns", ".2f"),
@@ -225,7 +242,7 @@ def main(argv=None) -> None:
                 print(f"{prec} {motion}, {rev if side == 'base' else 'this'}: "
                       f"{speeds[-1]:g} m/s costs {speed_ratios[key]:.2f}x {speeds[0]:g} m/s")
     finish(out, {"machine": info, "against": rev, "scene": args.scene,
-                 "broad_phase": args.broad_phase, "spheres": n,
+                 "broad_phase": args.broad_phase, "per_launch": args.per_launch, "spheres": n,
                  "frames": frames, "repeats": repeats, "rows": rows,
                  "speed_ratios": speed_ratios}, started)
 

@@ -116,7 +116,9 @@ if hasattr(warp_context, "_get_cpu_feature_set"):
     where["isa"] = ",".join(sorted(warp_context._get_cpu_feature_set()))
 print(json.dumps(where), flush=True)
 sys.stdin.readline()
-sim.step(frames)
+per = int(sys.argv[8]) or frames  # frames a launch: every step() call is one launch here
+for _ in range(frames // per):
+    sim.step(per)
 wp.synchronize_device("cpu")
 print("done", flush=True)
 sys.stdin.readline()
@@ -167,12 +169,13 @@ def save_case(scene_name: str, n: int, speed: float | None, folder: Path) -> str
 
 
 def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: str,
-          data: str, where: bool = False, memory: bool = False) -> dict:
+          data: str, where: bool = False, memory: bool = False, per_launch: int = 0) -> dict:
     """One process's counted events (totals) and its state's hash; ``site`` None is this
     checkout's installed package. With ``where``, the kernel is built with line tables and
     ``statements`` holds the events of each Python statement of it (:func:`statement_events`);
     with ``memory``, callgrind also simulates the caches (``MEMORY_EVENTS``), and the
-    statements hold their data reads and writes too.
+    statements hold their data reads and writes too. ``per_launch`` is the frames of each
+    ``sim.step`` call, each one launch (0: all ``frames`` in one).
     """
     env = dict(os.environ)
     if site is not None:
@@ -180,8 +183,8 @@ def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: s
     args = [sys.executable, "-c", CHILD, prec, motion, str(frames), broad_phase, data,
             LINE_TABLES if where else ""]
     with tempfile.TemporaryDirectory() as tmp:
-        native = native_build([*args, ""], env, tmp)
-        args.append(native.get("isa", ""))
+        native = native_build([*args, "", str(per_launch)], env, tmp)
+        args += [native.get("isa", ""), str(per_launch)]
         dump = ["--dump-instr=yes", "--dump-line=no", "--compress-pos=no",
                 "--compress-strings=no"] if where else []
         child = subprocess.Popen(
@@ -314,6 +317,9 @@ def main(argv=None) -> None:
     p.add_argument("--memory", action="store_true",
                    help="also simulate the caches: data reads and writes and the first- and "
                         "last-level misses per sphere-frame (with --where, per statement too)")
+    p.add_argument("--per-launch", type=int, default=0,
+                   help="frames each sim.step call advances, a divisor of F (default: all F in "
+                        "one launch); 1 counts a launch per frame, its cost per sphere included")
     args = p.parse_args(argv)
     if args.device != "cpu":
         sys.exit("benchmarks.instructions counts the CPU kernel: --device must be cpu")
@@ -323,6 +329,8 @@ def main(argv=None) -> None:
     started = time.perf_counter()
     _, info, out = start("instructions", args)
     n, frames = (500, 20) if args.quick else (2_000, 60)
+    if args.per_launch < 0 or (args.per_launch and frames % args.per_launch):
+        p.error(f"--per-launch must divide the {frames} frames")
     rev = None
     if args.against:
         rev = subprocess.run(["git", "rev-parse", "--short", args.against], check=True,
@@ -338,7 +346,8 @@ def main(argv=None) -> None:
                 hashes = {}
                 for side, where in sides:
                     r = count(where, prec, motion, frames, args.broad_phase, data,
-                              where=args.where > 0, memory=args.memory)
+                              where=args.where > 0, memory=args.memory,
+                              per_launch=args.per_launch)
                     hashes[side] = r["hash"]
                     if args.where:
                         row[f"{side}_statements"] = [
@@ -377,8 +386,9 @@ def main(argv=None) -> None:
                         (f"{name} LL write misses", f"{side}_ll_write_misses", ".3f")]
     if rev:
         columns += [("ratio", "ratio", ".3f"), ("identical", "identical", "s")]
-    print_table(f"Frame kernel under callgrind, scene {args.scene}, N = {n:,}, F = {frames}, "
-                "per sphere-frame" + (f": {rev} against this checkout" if rev else ""),
+    print_table(f"Frame kernel under callgrind, scene {args.scene}, N = {n:,}, F = {frames}"
+                + (f", {args.per_launch} frames a launch" if args.per_launch else "")
+                + ", per sphere-frame" + (f": {rev} against this checkout" if rev else ""),
                 rows, columns)
     for row in rows if args.where else []:
         for side, _ in sides:
@@ -418,7 +428,8 @@ def main(argv=None) -> None:
                       f"{r['instructions']:.2f}x the instructions, {r['branches']:.2f}x the "
                       f"branches, {r['mispredicted']:.2f}x the mispredicted ones")
     finish(out, {"machine": info, "against": rev, "scene": args.scene,
-                 "broad_phase": args.broad_phase, "spheres": n, "frames": frames,
+                 "broad_phase": args.broad_phase, "per_launch": args.per_launch, "spheres": n,
+                 "frames": frames,
                  "rows": rows, "speed_ratios": speed_ratios}, started)
 
 

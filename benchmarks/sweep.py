@@ -21,7 +21,14 @@ from warpsim.device import BVH_MIN_BOXES
 from warpsim.kernels.collide_kernels import collide_kernel
 from warpsim.kernels.data import Features
 from warpsim.kernels.precision import precision
-from warpsim.model import Spheres, kernel_arguments, put_model, to_device
+from warpsim.model import (
+    Spheres,
+    kernel_arguments,
+    put_model,
+    spheres_per_task,
+    task_count,
+    to_device,
+)
 
 from .common import finish, median_times, parser, print_table, start
 from .numpy_sweep import sweep_boxes_numpy
@@ -102,15 +109,16 @@ def device_sweep(boxes, position, velocity, radius, dt, precision_name, device,
            "t_out": wp.empty(n, dtype=p.scalar, device=device)}
     for name in ("contact_out", "normal_out", "new_position_out", "new_velocity_out"):
         out[name] = wp.empty(n, dtype=p.vec3, device=device)
+    per_task = spheres_per_task(device)
     args = kernel_arguments(
-        kernel, model=model, outputs=out,
+        kernel, model=model, outputs=out, values={"spheres_per_task": per_task},
         spheres=Spheres(radius=to_device(radius, p.scalar, p, device), mass=None),
         state_in={"position": to_device(position, p.vec3, p, device),
                   "velocity": to_device(velocity, p.vec3, p, device)})
     held = (model, args)  # the arguments carry the BVH's id: its owner must live as long
 
     def launch() -> None:
-        wp.launch(kernel, dim=n, inputs=held[1], device=device)
+        wp.launch(kernel, dim=task_count(n, per_task), inputs=held[1], device=device)
 
     def read() -> dict:
         return {"box": out["box_out"].numpy(), "t": out["t_out"].numpy(),

@@ -1,4 +1,6 @@
-"""Kernels for the batched single-frame queries (sheet methods 1-3): one thread per sphere."""
+"""Kernels for the batched single-frame queries (sheet methods 1-3): each task takes a block of
+``spheres_per_task`` spheres in turn (on the CPU many, ``warpsim.model.CPU_SPHERES_PER_TASK``;
+on a GPU one a thread), the same bits whatever the block (see ``frame_kernel``)."""
 
 
 from functools import cache
@@ -94,16 +96,22 @@ def collide_kernel(features: Features):
         box_out: wp.array[wp.int32], t_out: wp.array[scalar], contact_out: wp.array[vec3],
         normal_out: wp.array[vec3], new_position_out: wp.array[vec3],
         new_velocity_out: wp.array[vec3],
+        # Launch:
+        spheres_per_task: int,
     ):
-        i = wp.tid()
-        box, t, contact, n, new_p, new_v = first_contact(position_in[i], velocity_in[i],
-                                                         radius[i], physics, boxes, broad)
-        box_out[i] = box
-        t_out[i] = t
-        contact_out[i] = contact
-        normal_out[i] = n
-        new_position_out[i] = new_p
-        new_velocity_out[i] = new_v
+        # a block of spheres a task (a CPU task first copies the launch's arguments)
+        i = wp.tid() * spheres_per_task
+        last = wp.min(i + spheres_per_task, position_in.shape[0])
+        while i < last:
+            box, t, contact, n, new_p, new_v = first_contact(position_in[i], velocity_in[i],
+                                                             radius[i], physics, boxes, broad)
+            box_out[i] = box
+            t_out[i] = t
+            contact_out[i] = contact
+            normal_out[i] = n
+            new_position_out[i] = new_p
+            new_velocity_out[i] = new_v
+            i += 1
 
     return collide_spheres
 
@@ -155,21 +163,27 @@ def bounce_kernel(features: Features):
         bounces_out: wp.array[wp.int32], supports_out: wp.array[wp.int32],
         capped_out: wp.array[wp.int32], position_out: wp.array[vec3], velocity_out: wp.array[vec3],
         angular_momentum_out: wp.array[vec3], events_out: EventBuffer,
+        # Launch:
+        spheres_per_task: int,
     ):
-        i = wp.tid()
-        v = velocity_in[i]
-        m = mass[i]
-        a = position_in[i]
+        # a block of spheres a task (a CPU task first copies the launch's arguments)
+        i = wp.tid() * spheres_per_task
+        last = wp.min(i + spheres_per_task, position_in.shape[0])
         ph = query_physics(physics)
-        energy = kinetic_energy(m, v) + potential(m, ph.gravity, a, ph.origin)
-        x, v_new, L, energy, bounces, capped, supported = path(
-            a, v, radius[i], m, angular_momentum_in[i], energy, ph, boxes, broad, 0, i,
-            events_out)
-        bounces_out[i] = bounces - supported
-        supports_out[i] = supported
-        capped_out[i] = capped
-        position_out[i] = x
-        velocity_out[i] = v_new
-        angular_momentum_out[i] = L
+        while i < last:
+            v = velocity_in[i]
+            m = mass[i]
+            a = position_in[i]
+            energy = kinetic_energy(m, v) + potential(m, ph.gravity, a, ph.origin)
+            x, v_new, L, energy, bounces, capped, supported = path(
+                a, v, radius[i], m, angular_momentum_in[i], energy, ph, boxes, broad, 0, i,
+                events_out)
+            bounces_out[i] = bounces - supported
+            supports_out[i] = supported
+            capped_out[i] = capped
+            position_out[i] = x
+            velocity_out[i] = v_new
+            angular_momentum_out[i] = L
+            i += 1
 
     return bounce_spheres

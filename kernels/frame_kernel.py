@@ -1,4 +1,9 @@
-"""The frame kernel: one thread per sphere advances it by one or many time steps.
+"""The frame kernel: each task advances its spheres, in turn, by one or many time steps.
+
+A task takes a block of ``spheres_per_task`` spheres (the launch size is the spheres over the
+block, rounded up): on the CPU a block of many (``warpsim.model.CPU_SPHERES_PER_TASK``),
+since each task first copies the launch's arguments; on a GPU one sphere a thread. Every sphere's
+arithmetic is the same whatever the block, so the results are bit-identical.
 
 Per sphere (SPEC "Dynamics of one frame"): the move (the bounce loop along the chord of the
 frame's free-flight parabola, or the ballistic loop along the parabola itself), the speed reset
@@ -78,9 +83,10 @@ HORIZON_ULPS = 8.0
 def frame_kernel(features: Features):
     """Build the frame kernel for one feature set.
 
-    One thread per sphere advances it by ``frame_count`` frames with its state in registers,
-    writes the state once at the end, and (when ``record_every > 0``) writes every
-    ``record_every``-th frame and the last one into the record arrays. The frames are the same
+    Each sphere is advanced by ``frame_count`` frames with its state in registers (a task does
+    ``spheres_per_task`` of them in turn), its state written once at the end, and (when
+    ``record_every > 0``) every ``record_every``-th frame and the last one written into the
+    record arrays. The frames are the same
     arithmetic in the same order as one launch per frame, so the results are bit-identical
     whatever the frames per launch (a run of free frames included: its resets fall on frames of
     the sphere's age).
@@ -113,6 +119,9 @@ def frame_kernel(features: Features):
         record_every: record one frame in this many and the launch's last one (0: none).
         sphere_offset: index of the launch's first sphere in the swarm (event rows name it).
         first_frame: absolute frame of the state the launch starts from (births compare it).
+        spheres_per_task: spheres each task advances, one after another (>= 1): task ``j``
+            takes the launch's spheres ``j * spheres_per_task`` on, up to the last, so the
+            launch needs ``ceil(N / spheres_per_task)`` tasks (``N``: ``position_in``'s rows).
         record_position_out, record_orientation_out: (records, N) centres [m] and orientations.
         record_velocity_out, record_angular_velocity_out: (records, N) velocity at the
             recorded frame [m/s] (the state's) and world angular velocity ``Rot`` [rad/s];
@@ -501,6 +510,7 @@ def frame_kernel(features: Features):
         record_every: int,
         sphere_offset: int,
         first_frame: int,
+        spheres_per_task: int,
         # In:
         position_in: wp.array[vec3],
         velocity_in: wp.array[vec3],
@@ -522,155 +532,164 @@ def frame_kernel(features: Features):
         record_angular_velocity_out: wp.array2d[vec3],
         events_out: EventBuffer,
     ):
-        i = wp.tid()
-        sphere = sphere_offset + i
-        r = radius[i]
-        m = mass[i]
-        x = position_in[i]
-        v = velocity_in[i]
-        energy = energy_in[i]
-        L = vec3()
-        o = quat()
-        if wp.static(spin):
-            L = angular_momentum_in[i]
-            o = orientation_in[i]
-        bounces = int(0)
-        supports = int(0)
-        capped = int(0)
-        row = int(0)
-        with_motion = record_velocity_out.shape[0] > 0
-        born = int(0)
-        if wp.static(births):
-            born = birth_frame[i] - first_frame  # frames of this launch before its birth
-        # a ballistic frame held at a contact that may be a support: its state and counts
-        # (counted_frame), finished outside the inner loop of frames (held_frame)
-        held, rest, box, s, n, held_counts = nothing_held()
-        L_new = L
-        o_new = o
-        f = int(0)
-        if wp.static(free_flight):
-            # a frame beyond every box's bounds takes the free step; a run of them goes on in
-            # a loop of its own, with no call of the bounce loop in it (the same moves, bits)
-            grow = path_grow(r, physics)
-            age = first_frame  # the sphere's age after the launch's frame f is age + f + 1
+        # each task advances a block of spheres, one after another: a task first copies the
+        # launch's arguments (on the CPU about 230 instructions a task, since a store to an
+        # output array may alias them), which one sphere a task paid once per sphere and
+        # launch (BENCHMARKS.md, "A launch's cost per sphere"); on a GPU a block is one sphere
+        i = wp.tid() * spheres_per_task
+        last = wp.min(i + spheres_per_task, position_in.shape[0])
+        while i < last:
+            sphere = sphere_offset + i
+            r = radius[i]
+            m = mass[i]
+            x = position_in[i]
+            v = velocity_in[i]
+            energy = energy_in[i]
+            L = vec3()
+            o = quat()
+            if wp.static(spin):
+                L = angular_momentum_in[i]
+                o = orientation_in[i]
+            bounces = int(0)
+            supports = int(0)
+            capped = int(0)
+            row = int(0)
+            with_motion = record_velocity_out.shape[0] > 0
+            born = int(0)
             if wp.static(births):
-                age = first_frame - birth_frame[i]
-        free = int(-2)  # free flight: the test of frame f: an axis, -1 (not free), -2 (not made)
-        while f < frame_count:
+                born = birth_frame[i] - first_frame  # frames of this launch before its birth
+            # a ballistic frame held at a contact that may be a support: its state and counts
+            # (counted_frame), finished outside the inner loop of frames (held_frame)
+            held, rest, box, s, n, held_counts = nothing_held()
+            L_new = L
+            o_new = o
+            f = int(0)
             if wp.static(free_flight):
-                while held == 0 and f < frame_count:
-                    live = int(1)
-                    if wp.static(births):
-                        if f < born:
-                            live = 0
-                    if live == 1 and free == -2:
-                        free = frame_clear(x, v, r, physics, boxes, -1)
-                    if live == 1 and free >= 0:
-                        turn_by = o
-                        turning = int(0)
-                        if wp.static(spin):
-                            turn_by, turning = spin_turn(L, o, r, m, physics)
-                        # frames to the next energy reset: an age multiple of RESET_EVERY
-                        to_reset = RESET_EVERY - (age + f) % RESET_EVERY
-                        while free >= 0 and f < frame_count:
-                            # frames to take untested: up to the next reset, record and the
-                            # launch's end, when they and the frame after them are proven clear
-                            k = wp.min(to_reset, frame_count - f)
-                            if record_every > 0:
-                                k = wp.min(k, record_every - f % record_every)
-                            after = int(-2)  # the test of the frame after them
-                            if wp.static(horizon):
-                                sure = horizon_clear(x, v, grow, physics, boxes, free, k + 1)
-                                if sure >= 0:
-                                    free = sure
-                                    after = sure
+                # a frame beyond every box's bounds takes the free step; a run of them goes on in
+                # a loop of its own, with no call of the bounce loop in it (the same moves, bits)
+                grow = path_grow(r, physics)
+                age = first_frame  # the sphere's age after the launch's frame f is age + f + 1
+                if wp.static(births):
+                    age = first_frame - birth_frame[i]
+            # free flight: the test of frame f: an axis, -1 (not free), -2 (not made)
+            free = int(-2)
+            while f < frame_count:
+                if wp.static(free_flight):
+                    while held == 0 and f < frame_count:
+                        live = int(1)
+                        if wp.static(births):
+                            if f < born:
+                                live = 0
+                        if live == 1 and free == -2:
+                            free = frame_clear(x, v, r, physics, boxes, -1)
+                        if live == 1 and free >= 0:
+                            turn_by = o
+                            turning = int(0)
+                            if wp.static(spin):
+                                turn_by, turning = spin_turn(L, o, r, m, physics)
+                            # frames to the next energy reset: an age multiple of RESET_EVERY
+                            to_reset = RESET_EVERY - (age + f) % RESET_EVERY
+                            while free >= 0 and f < frame_count:
+                                # frames to take untested: up to the next reset, record and the
+                                # launch's end, when they and the frame after them are proven clear
+                                k = wp.min(to_reset, frame_count - f)
+                                if record_every > 0:
+                                    k = wp.min(k, record_every - f % record_every)
+                                after = int(-2)  # the test of the frame after them
+                                if wp.static(horizon):
+                                    sure = horizon_clear(x, v, grow, physics, boxes, free, k + 1)
+                                    if sure >= 0:
+                                        free = sure
+                                        after = sure
+                                    else:
+                                        k = 1
                                 else:
                                     k = 1
-                            else:
-                                k = 1
-                            taken = int(0)  # a while loop: see candidates.nearest_cell
-                            while taken < k:
-                                x, v = free_move(x, v, physics)
-                                if wp.static(spin):
-                                    o = turned(o, turn_by, turning)
-                                taken += 1
-                            f += k
-                            to_reset -= k
-                            # the last frame's energy reset: at an age multiple of
-                            # RESET_EVERY, and before a frame that is not free (tested at the
-                            # launch's end too, so that the state is that of any other split
-                            # into launches)
-                            reset = int(0)
-                            if to_reset == 0:
-                                reset = 1
-                                to_reset = RESET_EVERY
-                            elif after == -2:
-                                after = frame_clear(x, v, r, physics, boxes, free)
-                                if after < 0:
+                                taken = int(0)  # a while loop: see candidates.nearest_cell
+                                while taken < k:
+                                    x, v = free_move(x, v, physics)
+                                    if wp.static(spin):
+                                        o = turned(o, turn_by, turning)
+                                    taken += 1
+                                f += k
+                                to_reset -= k
+                                # the last frame's energy reset: at an age multiple of
+                                # RESET_EVERY, and before a frame that is not free (tested at the
+                                # launch's end too, so that the state is that of any other split
+                                # into launches)
+                                reset = int(0)
+                                if to_reset == 0:
                                     reset = 1
-                            if reset == 1:
-                                v = free_reset(x, v, energy, m, physics)
-                                after = -2
-                                if f < frame_count:
+                                    to_reset = RESET_EVERY
+                                elif after == -2:
                                     after = frame_clear(x, v, r, physics, boxes, free)
-                            row = record_frame(f - 1, frame_count, record_every, row, i,
-                                               with_motion, x, v, L, o, r, m, physics,
-                                               orientation_in, record_position_out,
-                                               record_orientation_out, record_velocity_out,
-                                               record_angular_velocity_out)
-                            free = after
-                    else:
-                        (x, v, L_new, o_new, energy, bounces, supports, capped, held, rest, box,
-                         s, n, held_counts) = counted_frame(
-                            live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1,
-                            sphere, events_out, bounces, supports, capped)
+                                    if after < 0:
+                                        reset = 1
+                                if reset == 1:
+                                    v = free_reset(x, v, energy, m, physics)
+                                    after = -2
+                                    if f < frame_count:
+                                        after = frame_clear(x, v, r, physics, boxes, free)
+                                row = record_frame(f - 1, frame_count, record_every, row, i,
+                                                   with_motion, x, v, L, o, r, m, physics,
+                                                   orientation_in, record_position_out,
+                                                   record_orientation_out, record_velocity_out,
+                                                   record_angular_velocity_out)
+                                free = after
+                        else:
+                            (x, v, L_new, o_new, energy, bounces, supports, capped, held, rest,
+                             box, s, n, held_counts) = counted_frame(
+                                live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1,
+                                sphere, events_out, bounces, supports, capped)
+                            if held == 0:
+                                if wp.static(spin):  # else L and o are not the loop's
+                                    L = L_new
+                                    o = o_new
+                                row = record_frame(f, frame_count, record_every, row, i,
+                                                   with_motion, x, v, L, o, r, m, physics,
+                                                   orientation_in, record_position_out,
+                                                   record_orientation_out, record_velocity_out,
+                                                   record_angular_velocity_out)
+                                f += 1
+                                free = -2
+                else:
+                    while held == 0 and f < frame_count:
+                        live = int(1)
+                        if wp.static(births):
+                            if f < born:
+                                live = 0
+                        (x, v, L_new, o_new, energy, bounces, supports, capped, held, rest, box, s,
+                         n, held_counts) = counted_frame(
+                            live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1, sphere,
+                            events_out, bounces, supports, capped)
                         if held == 0:
                             if wp.static(spin):  # else L and o are not the loop's
                                 L = L_new
                                 o = o_new
-                            row = record_frame(f, frame_count, record_every, row, i,
-                                               with_motion, x, v, L, o, r, m, physics,
-                                               orientation_in, record_position_out,
-                                               record_orientation_out, record_velocity_out,
-                                               record_angular_velocity_out)
+                            row = record_frame(f, frame_count, record_every, row, i, with_motion,
+                                               x, v, L, o, r, m, physics, orientation_in,
+                                               record_position_out, record_orientation_out,
+                                               record_velocity_out, record_angular_velocity_out)
                             f += 1
-                            free = -2
-            else:
-                while held == 0 and f < frame_count:
-                    live = int(1)
-                    if wp.static(births):
-                        if f < born:
-                            live = 0
-                    (x, v, L_new, o_new, energy, bounces, supports, capped, held, rest, box, s,
-                     n, held_counts) = counted_frame(
-                        live, x, v, L, o, energy, r, m, physics, boxes, broad, f + 1, sphere,
-                        events_out, bounces, supports, capped)
-                    if held == 0:
-                        if wp.static(spin):  # else L and o are not the loop's
-                            L = L_new
-                            o = o_new
-                        row = record_frame(f, frame_count, record_every, row, i, with_motion,
-                                           x, v, L, o, r, m, physics, orientation_in,
-                                           record_position_out, record_orientation_out,
-                                           record_velocity_out, record_angular_velocity_out)
-                        f += 1
-            if held == 1:
-                x, v, L, o, energy, bounces, supports, capped, row = held_frame(
-                    f, frame_count, record_every, row, i, with_motion, x, v, L_new, o_new, L, o,
-                    energy, r, m, physics, boxes, broad, sphere, events_out, rest, box, s, n,
-                    held_counts, bounces, supports, capped, orientation_in, record_position_out,
-                    record_orientation_out, record_velocity_out, record_angular_velocity_out)
-                held = 0
-                f += 1
-                free = -2
-        position_out[i] = x
-        velocity_out[i] = v
-        energy_out[i] = energy
-        if wp.static(spin):
-            angular_momentum_out[i] = L
-            orientation_out[i] = o
-        bounce_count_out[i] += bounces
-        support_count_out[i] += supports
-        capped_count_out[i] += capped
+                if held == 1:
+                    x, v, L, o, energy, bounces, supports, capped, row = held_frame(
+                        f, frame_count, record_every, row, i, with_motion, x, v, L_new, o_new, L,
+                        o, energy, r, m, physics, boxes, broad, sphere, events_out, rest, box, s,
+                        n, held_counts, bounces, supports, capped, orientation_in,
+                        record_position_out, record_orientation_out, record_velocity_out,
+                        record_angular_velocity_out)
+                    held = 0
+                    f += 1
+                    free = -2
+            position_out[i] = x
+            velocity_out[i] = v
+            energy_out[i] = energy
+            if wp.static(spin):
+                angular_momentum_out[i] = L
+                orientation_out[i] = o
+            bounce_count_out[i] += bounces
+            support_count_out[i] += supports
+            capped_count_out[i] += capped
+            i += 1
 
     return advance_frames

@@ -62,7 +62,8 @@ FRAME_COUNTERS = {"bounce_count_out", "support_count_out", "capped_count_out",
                   "record_orientation_out", "record_velocity_out",
                   "record_angular_velocity_out"}
 #: Plain per-launch values (the launch helper's ``values``).
-LAUNCH_VALUES = {"frame_count", "record_every", "sphere_offset", "first_frame"}
+LAUNCH_VALUES = {"frame_count", "record_every", "sphere_offset", "first_frame",
+                 "spheres_per_task"}
 #: Outputs of a whole launch (the launch helper's ``launch_outputs``).
 EVENT_OUTPUTS = {"events_out"}
 
@@ -90,7 +91,8 @@ def test_every_simulator_argument_is_the_named_array():
     sim = ws.Simulator(ws.Scene(boxes, friction=0.1), swarm, device="cpu")
     records = sim._records(2, True)
     events = {"events_out": event_buffer(sim.model.precision, sim.device, 4)}
-    values = {"frame_count": 3, "record_every": 2, "sphere_offset": 0, "first_frame": 0}
+    values = {"frame_count": 3, "record_every": 2, "sphere_offset": 0, "first_frame": 0,
+              "spheres_per_task": 1}
     args = kernel_arguments(sim._kernel, model=sim.model, spheres=sim.spheres,
                             state_in=sim.state_0, state_out=sim.state_1,
                             outputs={**sim.counters, **records}, launch_outputs=events,

@@ -213,3 +213,74 @@ def test_a_gpu_launch_holds_many_frames_and_a_recording_one_keeps_its_buffers_bo
                 rows = frames // every
                 expected = footprint.run_bytes(n, 2, every=every, launch_sphere_frames=budget)
                 assert 2 * rows * n * 7 * 4 <= max(expected.launch, 2 * n * 7 * 4)
+
+
+def everything(sim: ws.Simulator, traj) -> dict:
+    """Every result of a run: the state, the recorded frames and velocities, the counters and
+    the contact table's columns."""
+    out = {"state": state_bytes(sim), "bounces": sim.stats.bounces,
+           "supports": sim.stats.supports, "capped": sim.stats.capped}
+    for name in ("position", "orientation", "velocity", "angular_velocity"):
+        out[name] = np.asarray(getattr(traj, name)).tobytes()
+    out.update({k: np.asarray(v).tobytes() for k, v in traj.events.columns().items()})
+    return out
+
+
+@pytest.mark.parametrize("scene_name,motion", [("room", "linear"), ("plates", "ballistic"),
+                                               ("spin", "linear"), ("nozzle", "ballistic")])
+def test_the_spheres_a_task_advances_change_no_bit(scene_name, motion, precision):
+    """A CPU task advances a block of spheres in turn (a GPU thread one): whatever the block,
+    one sphere (the GPU's mapping), a few, blocks that straddle the shards' borders, or one
+    block larger than the swarm, every result is the same bits, records, events and births
+    (``nozzle`` emits over time) included, with one worker or three."""
+    from warpsim import model
+
+    scene = ws.Scene.load(scene_name)
+    swarm = scene.spawn(n=101, seed=5)
+    assert model.CPU_SPHERES_PER_TASK > 1
+
+    def results(per_task, workers):
+        sim = ws.Simulator(scene, swarm, workers=workers, motion=motion, precision=precision,
+                           device="cpu")
+        assert sim._per_task == model.CPU_SPHERES_PER_TASK
+        sim._per_task = per_task
+        sim.step(3)  # the recorded step launches
+        traj = sim.run(90, every=6, velocities=True, events=True)
+        return everything(sim, traj)
+
+    reference = results(1, 1)
+    assert reference["bounces"] > 0
+    for per_task, workers in ((3, 1), (7, 3), (64, 3), (500, 1)):
+        assert results(per_task, workers) == reference, (per_task, workers)
+
+
+@pytest.mark.parametrize("motion", ["linear", "ballistic"])
+def test_the_single_frame_queries_change_no_bit_with_the_block(monkeypatch, motion, precision):
+    """``collide_boxes`` and ``bounce`` launch a task a block of spheres on the CPU too: one
+    sphere a task (the GPU's mapping), a few, or one block larger than the batch give the same
+    bits in every output."""
+    import dataclasses
+
+    from warpsim import model
+
+    scene = ws.Scene.load("room")
+    swarm = dataclasses.replace(scene.emitter, count=301, speed=60.0).spawn(scene.boxes, seed=3)
+    dt = 4 * scene.dt  # long paths: many contacts, several bounces
+
+    gravity = scene.gravity if motion == "ballistic" else None
+
+    def results(per_task):
+        monkeypatch.setattr(model, "CPU_SPHERES_PER_TASK", per_task)
+        c = ws.collide_boxes(swarm.position, swarm.velocity, swarm.radius, scene.boxes, dt,
+                             precision=precision, motion=motion, gravity=gravity, device="cpu")
+        b = ws.bounce(swarm.position, swarm.velocity, swarm.radius, scene.boxes, dt,
+                      precision=precision, motion=motion, gravity=gravity, friction=0.3,
+                      device="cpu")
+        return ({k: np.asarray(v).tobytes() for k, v in vars(c).items()},
+                {k: np.asarray(v).tobytes() for k, v in vars(b).items()}, int(c.hit.sum()),
+                int(b.bounces.sum()))
+
+    reference = results(1)
+    assert reference[2] > 20 and reference[3] > 20
+    for per_task in (4, 64, 1000):
+        assert results(per_task) == reference, per_task

@@ -336,10 +336,36 @@ def kernel_arguments(kernel, *, model: Model | None = None, spheres: Spheres | N
     return args
 
 
-def launch(kernel, dim: int, device, **sources) -> None:
-    """Launch ``kernel`` over ``dim`` threads with the arguments of :func:`kernel_arguments`."""
-    wp.launch(kernel, dim=dim, device=device, inputs=kernel_arguments(kernel, **sources))
+#: Spheres each task of a CPU launch advances, one after another (a GPU thread takes one). A CPU
+#: task first copies the launch's arguments, which the compiler cannot keep across tasks (a
+#: store to an output array might change them): about 230 instructions a task for the frame
+#: kernel, which a task of one sphere paid once per sphere and launch (BENCHMARKS.md, "A
+#: launch's cost per sphere").
+CPU_SPHERES_PER_TASK = 64
 
 
-__all__ = ["DeviceState", "Model", "Spheres", "event_buffer", "kernel_arguments", "launch",
-           "parameter_names", "put_model", "put_spheres", "put_state", "to_device"]
+def spheres_per_task(device) -> int:
+    """The spheres each task of a launch on ``device`` advances (the kernels' launch value
+    ``spheres_per_task``): ``CPU_SPHERES_PER_TASK`` on the CPU, one on a GPU."""
+    return CPU_SPHERES_PER_TASK if wp.get_device(device).is_cpu else 1
+
+
+def task_count(spheres: int, per_task: int) -> int:
+    """The launch size for ``spheres`` spheres, ``per_task`` a task: ``ceil(spheres /
+    per_task)``."""
+    return -(-spheres // per_task)
+
+
+def launch(kernel, count: int, device, **sources) -> None:
+    """Launch ``kernel`` over ``count`` spheres with the arguments of :func:`kernel_arguments`,
+    ``spheres_per_task`` (:func:`spheres_per_task`) added to its ``values``: :func:`task_count`
+    tasks."""
+    per_task = spheres_per_task(device)
+    values = {**(sources.pop("values", None) or {}), "spheres_per_task": per_task}
+    wp.launch(kernel, dim=task_count(count, per_task), device=device,
+              inputs=kernel_arguments(kernel, values=values, **sources))
+
+
+__all__ = ["CPU_SPHERES_PER_TASK", "DeviceState", "Model", "Spheres", "event_buffer",
+           "kernel_arguments", "launch", "parameter_names", "put_model", "put_spheres",
+           "put_state", "spheres_per_task", "task_count", "to_device"]

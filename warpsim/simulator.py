@@ -27,6 +27,8 @@ from .model import (
     put_model,
     put_spheres,
     put_state,
+    spheres_per_task,
+    task_count,
 )
 from .scene import Scene
 from .swarm import Swarm
@@ -238,6 +240,8 @@ class Simulator:
                                                else check.flag("free_flight", free_flight)),
                                   falls=bool(np.any(np.asarray(scene.gravity) != 0.0)))
         self._kernel = frame_kernel(self._features)
+        self._per_task = spheres_per_task(self.device)
+        """Spheres each task of the frame kernel advances, one after another."""
         self._upload(swarm)
         self._shards = _shards(self._n, self.workers)
         self._executor = None
@@ -292,7 +296,8 @@ class Simulator:
                                 state_in=self.state_0, state_out=self.state_1,
                                 outputs={**self.counters, **records},
                                 launch_outputs={"events_out": events},
-                                values={**values, "sphere_offset": offset}, rows=rows)
+                                values={**values, "sphere_offset": offset,
+                                        "spheres_per_task": self._per_task}, rows=rows)
 
     def _records(self, rows: int, motion: bool) -> dict:
         """Device arrays the kernel writes ``rows`` recorded frames into, (rows, N) each; the
@@ -341,7 +346,7 @@ class Simulator:
             shards = self._launch_rows()
             buffers = events if events is not None else [self._no_events] * len(shards)
             self._run_launches(kernel, [
-                partial(wp.launch, kernel, dim=self._rows_count(rows), device=self.device,
+                partial(wp.launch, kernel, dim=self._task_count(rows), device=self.device,
                         inputs=self._arguments(kernel, rows, values, records, buffer))
                 for rows, buffer in zip(shards, buffers, strict=True)])
         self.state_0, self.state_1 = self.state_1, self.state_0
@@ -360,7 +365,7 @@ class Simulator:
             if len(self._step_launches) >= 2:  # the two parities of the current states only
                 self._step_launches.clear()
             values = {"frame_count": 0, "record_every": 0, "first_frame": 0}
-            launches = [wp.launch(self._kernel, dim=self._rows_count(rows), device=self.device,
+            launches = [wp.launch(self._kernel, dim=self._task_count(rows), device=self.device,
                                   inputs=self._arguments(self._kernel, rows, values,
                                                          self._no_records, self._no_events),
                                   record_cmd=True)
@@ -378,6 +383,11 @@ class Simulator:
 
     def _rows_count(self, rows: slice | None) -> int:
         return self._n if rows is None else rows.stop - rows.start
+
+    def _task_count(self, rows: slice | None) -> int:
+        """The frame kernel's launch size for ``rows``: one task a block of
+        ``_per_task`` spheres."""
+        return task_count(self._rows_count(rows), self._per_task)
 
     def _run_launches(self, kernel, calls: list) -> None:
         """Make the calls that launch ``kernel`` on each shard, all shards at once on the
