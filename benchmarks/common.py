@@ -132,7 +132,10 @@ def start(name: str, args: argparse.Namespace):
     from warpsim.device import resolve_device
 
     init_warp(debug=False)  # without Warp's start-up lines
-    device = resolve_device(args.device)
+    try:
+        device = resolve_device(args.device)
+    except ValueError as exc:  # one line, as the command-line tool says it, not a traceback
+        raise SystemExit(f"python -m benchmarks.{name}: error: {exc}") from None
     info = machine(device)
     print(f"# {name}{' (quick)' if args.quick else ''}\n\n{info['cpu']} ({info['cpu_id']}), "
           f"{info['cores']} cores, "

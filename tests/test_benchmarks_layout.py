@@ -57,3 +57,25 @@ def test_machine_records_versions_and_commit():
     info = machine()
     assert {"platform", "cpu", "cpu_id", "cores", "python", "numpy", "warp", "warpsim",
             "commit", "dirty"} <= set(info)
+
+
+#: The studies that take ``--device`` and start through :func:`benchmarks.common.start`.
+DEVICE_STUDIES = ("speed", "sweep", "hot_loop", "accuracy_tables", "opt_level", "broad_walk",
+                  "end_to_end", "frame_floor")
+
+
+@pytest.mark.parametrize("name", DEVICE_STUDIES)
+def test_a_device_that_is_not_there_is_one_line_and_no_file(name, tmp_path):
+    """``--device cuda:0`` on a machine without it (or any unknown device) stops the study
+    before it measures anything, with one line naming the study and the device, and writes no
+    results file."""
+    import importlib
+
+    study = importlib.import_module(f"benchmarks.{name}")
+    out = tmp_path / "results.json"
+    with pytest.raises(SystemExit) as stop:
+        study.main(["--quick", "--device", "nosuch:7", "--out", str(out)])
+    message = str(stop.value)
+    assert "\n" not in message
+    assert message.startswith(f"python -m benchmarks.{name}: error: device 'nosuch:7'")
+    assert not out.exists()
