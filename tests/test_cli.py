@@ -315,6 +315,54 @@ def test_python_dash_m_warpsim_is_the_command_line():
     assert out.stdout.strip() == f"warpsim {__version__}"
 
 
+CONSOLE = """
+import atexit, sys
+atexit.register(lambda: print("exit handler ran"))
+sys.argv = ["warpsim", *sys.argv[1:]]
+from warpsim.apps.cli import console
+console()
+print("never reached")
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("args,code", [(["scenes"], 0), (["--version"], 0),
+                                       (["run", "no-such-scene"], 1), (["run"], 2),
+                                       (["no-such-command"], 2)])
+def test_the_command_ends_with_its_code_its_output_and_its_exit_handlers(args, code):
+    """The console script ends the process itself, without the interpreter's teardown, once
+    :func:`main` returns: with main's exit code (usage errors 2, errors 1), everything it wrote
+    on both streams, then what the ``atexit`` handlers print, and nothing after."""
+    out = subprocess.run([sys.executable, "-c", CONSOLE, *args], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == code, out.stderr
+    assert out.stdout.endswith("exit handler ran\n")
+    assert "never reached" not in out.stdout
+    if args == ["scenes"]:
+        names = [line.split()[0] for line in out.stdout.strip().splitlines()[:-1]]
+        assert names == [name for name, _ in ws.list_scenes()]
+    if code:
+        assert out.stderr.strip(), "an error says why"
+
+
+@pytest.mark.slow
+def test_a_system_exit_with_a_message_is_code_1_and_the_message(monkeypatch, capsys):
+    """``SystemExit("message")`` out of :func:`main` (as a study or a library may raise) ends
+    the command as Python would: the message on standard error and code 1."""
+    from warpsim.apps import cli as cli_module
+
+    ended = []
+
+    def stop(*_):
+        raise SystemExit("warpsim: something said why")
+
+    monkeypatch.setattr(cli_module, "main", stop)
+    monkeypatch.setattr(cli_module, "fast_exit", ended.append)
+    cli_module.console()
+    assert ended == [1]
+    assert capsys.readouterr().err == "warpsim: something said why\n"
+
+
 def test_a_long_kernel_build_says_what_the_run_waits_for(tmp_path, capsys, monkeypatch):
     """A build longer than ``BUILD_NOTICE_S`` (a first build on a slow machine) is named
     on standard error while it runs; a quick one says nothing."""

@@ -1,5 +1,5 @@
 """``python -m warpsim``: the ``warpsim`` command line."""
 
-from .apps.cli import main
+from .apps.cli import console
 
-raise SystemExit(main())
+console()
