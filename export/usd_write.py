@@ -289,6 +289,15 @@ def _shapes(boxes: RoundedBoxes) -> tuple[np.ndarray, np.ndarray]:
     return rank[inverse.reshape(-1)], key[first[order]]
 
 
+def same_bits(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two arrays hold the same values to the bit (``-0.0`` is not ``0.0``, a NaN is
+    the same NaN), with the same type and shape."""
+    if a.dtype != b.dtype or a.shape != b.shape:
+        return False
+    return bool(np.array_equal(np.ascontiguousarray(a).view(np.uint8),
+                               np.ascontiguousarray(b).view(np.uint8)))
+
+
 def half_orientations(q, previous=None, previous_q=None) -> np.ndarray:
     """Quaternions (x, y, z, w) in half precision, as good as half precision allows.
 
@@ -497,14 +506,21 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
         return Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(values, dtype=np.float32)
                                        .reshape(n, 3))
 
+    # every sphere in order: a frame's rows as they are, without a gathered copy
+    everyone = idx.size == trajectory.position.shape[1] and bool(
+        np.array_equal(idx, np.arange(idx.size)))
+
+    def chosen(values):
+        return values if everyone else values[idx]
+
     # Vt quaternion arrays lay out each element as (i, j, k, real): warpsim's (x, y, z, w) order,
     # so the numpy rows go in unchanged (the Gf constructors, by contrast, take the real first).
     previous = previous_q = None
+    turned = None  # the frame's quaternions as the trajectory holds them, for the next frame
     hidden_before = None
     with Sdf.ChangeBlock():
         for row, origin in zip(rows, origins, strict=True):
             time = float(frames[row])
-            q = np.asarray(trajectory.orientation[row])[idx]
             if "origin" in paths:
                 layer.SetTimeSample(paths["origin"], time, Gf.Vec3d(*origin.tolist()))
             if births is not None:
@@ -513,14 +529,22 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
                     layer.SetTimeSample(paths["invisibleIds"], time, hidden)
                 hidden_before = hidden
             layer.SetTimeSample(paths["positions"], time,
-                                vec3(trajectory.position[row][idx] - origin))
-            # Each precision rounded from the source values (no double rounding via float32).
-            layer.SetTimeSample(paths["orientationsf"], time, Vt.QuatfArray.FromNumpy(
-                np.ascontiguousarray(q, dtype=np.float32).reshape(n, 4)))
-            previous, previous_q = half_orientations(q, previous, previous_q), q
-            layer.SetTimeSample(paths["orientations"], time, Vt.QuathArray.FromNumpy(previous))
+                                vec3(chosen(trajectory.position[row]) - origin))
+            raw = np.asarray(trajectory.orientation[row])
+            if turned is None or not same_bits(raw, turned):
+                # Each precision rounded from the source values (no double rounding via
+                # float32); a frame whose quaternions are the previous frame's to the bit (a
+                # swarm that does not spin) writes the previous frame's arrays again
+                q = chosen(raw)
+                quat_f = Vt.QuatfArray.FromNumpy(np.ascontiguousarray(q, dtype=np.float32)
+                                                 .reshape(n, 4))
+                previous, previous_q = half_orientations(q, previous, previous_q), q
+                quat_h = Vt.QuathArray.FromNumpy(previous)
+            turned = raw
+            layer.SetTimeSample(paths["orientationsf"], time, quat_f)
+            layer.SetTimeSample(paths["orientations"], time, quat_h)
             if velocity is not None:
-                layer.SetTimeSample(paths["velocities"], time, vec3(velocity[row][idx]))
+                layer.SetTimeSample(paths["velocities"], time, vec3(chosen(velocity[row])))
             if angular is not None:
                 degrees = np.asarray(angular[row], dtype=np.float64)[idx] * DEGREES_PER_RADIAN
                 layer.SetTimeSample(paths["angularVelocities"], time, vec3(degrees))

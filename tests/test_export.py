@@ -185,6 +185,44 @@ def test_half_orientations_of_unchanged_rows_are_the_whole_computation(still):
         np.testing.assert_array_equal(incremental, whole)
 
 
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize("spheres", [None, [4, 0, 2]])
+def test_every_frame_writes_its_own_orientations_repeated_or_not(tmp_path, fmt, spheres):
+    """Frames whose quaternions repeat the frame before's to the bit (a swarm that does not
+    spin) write the same arrays again; any other frame writes its own: ``orientationsf`` at
+    each sample is the float32 of that frame's quaternions, bits included in ``.usda`` (a frame
+    that differs from the one before only by a zero's sign writes that sign; the crate format,
+    ``.usdc``, stores arrays equal by value once, so there the sign of a zero may be that of an
+    equal array written before), and ``orientations`` is what the half-precision choice gives
+    frame after frame from scratch."""
+    traj = make_trajectory(n_frames=7, n_spheres=5, seed=4)
+    q = traj.orientation
+    q[1] = q[0]  # repeated
+    q[2] = q[0]
+    q[3] = unit_quaternions(np.random.default_rng(5), (5,))  # turned
+    q[4] = q[0]  # back to an earlier frame's
+    q[4, 1, 2] = 0.0
+    q[5] = q[4]
+    q[5, 1, 2] = -0.0  # only a zero's sign differs from the frame before
+    q[6] = q[5]
+    out = write_usd(tmp_path / f"anim.{fmt}", None, traj, spheres=spheres)
+    stage = Usd.Stage.Open(str(out))
+    instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Spheres"))
+    chosen = np.arange(5) if spheres is None else np.asarray(spheres)
+    whole = None
+    for k, frame in enumerate(traj.frame):
+        want = q[k][chosen]
+        got_f = np.array(instancer.GetOrientationsfAttr().Get(float(frame)), dtype=np.float32)
+        if fmt == "usda":
+            np.testing.assert_array_equal(got_f.view(np.uint32),
+                                          want.astype(np.float32).view(np.uint32))
+        else:
+            np.testing.assert_array_equal(got_f, want.astype(np.float32))
+        whole = half_orientations(want, whole)
+        got_h = np.array(instancer.GetOrientationsAttr().Get(float(frame)), dtype=np.float16)
+        np.testing.assert_array_equal(got_h, whole)
+
+
 @pytest.mark.parametrize("attribute", ["orientationsf", "orientations"])
 def test_usd_reads_rotations_in_warpsim_convention(tmp_path, attribute):
     """USD's own instance transforms equal warpsim's (x, y, z, w) rotations and positions.
