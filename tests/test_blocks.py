@@ -73,7 +73,7 @@ def test_emitter_velocities_in_blocks_are_the_serial_formula(emitter, n, tiny_bl
     """The blocked draw is the serial draw from one generator, bit for bit, and leaves the
     generator where the serial draw leaves it."""
     rng = np.random.default_rng(3)
-    got = emitter._velocities(rng, n)
+    got = emitter._velocities(rng, n, emitter._cone())
     serial = np.random.default_rng(3)
     assert got.tobytes() == emitter_velocity_formula(emitter, serial, n).tobytes()
     assert rng.random() == serial.random()

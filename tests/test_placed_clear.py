@@ -142,3 +142,43 @@ def test_two_spheres_swapped_are_checked(checks):
     swarm.position.setflags(write=False)
     ws.Simulator(scene, swarm, device="cpu")
     assert len(checks) == 1
+
+
+@pytest.mark.parametrize("name", ["room", "nozzle", "pinball"])
+def test_a_joined_draw_is_the_swarms_one_after_the_other(name, checks):
+    """``spawn_many(join=True)`` (a sharded draw's blocks) is the concatenation of the swarms
+    drawn one by one, bit for bit, births included, placed outside the boxes and marked so
+    once for the whole."""
+    scene = ws.Scene.load(name)
+    counts, seeds = [128, 128, 37], [4, 9, 2]
+    apart = scene.spawn_many(counts, seeds)
+    (joined,) = scene.spawn_many(counts, seeds, join=True)
+    for field in ("position", "velocity", "radius", "mass", "angular_momentum", "orientation",
+                  "birth_frame"):
+        want = np.concatenate([getattr(s, field) for s in apart])
+        assert getattr(joined, field).tobytes() == want.tobytes(), field
+    assert _outside(scene.boxes, joined)
+    before = len(checks)
+    ws.Simulator(scene, joined, device="cpu")
+    assert len(checks) == before
+
+
+class ListedEmitter:
+    """An emitter of its own (not a ``warpsim.Emitter``): its spheres are checked by the
+    scene, and a swarm joined from them is checked again by a simulator."""
+
+    def spawn(self, boxes, n=None, seed=None):
+        rng = np.random.default_rng(seed)
+        return ws.Swarm(rng.uniform([-1, 1, -1], [1, 2, 1], (n, 3)), np.zeros((n, 3)),
+                        radius=0.05)
+
+
+def test_a_joined_draw_of_another_emitter_is_checked_by_the_simulator(checks):
+    room = ws.Scene.load("room")
+    scene = ws.Scene(room.boxes, emitter=ListedEmitter(), name="listed")
+    apart = scene.spawn_many([20, 30], [1, 2])
+    (joined,) = scene.spawn_many([20, 30], [1, 2], join=True)
+    assert joined.position.tobytes() == np.concatenate([s.position for s in apart]).tobytes()
+    before = len(checks)
+    ws.Simulator(scene, joined, device="cpu")
+    assert len(checks) == before + 1

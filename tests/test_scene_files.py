@@ -460,7 +460,7 @@ def test_emitter_velocities_are_the_written_formula_bit_for_bit(emitter):
     from helpers import emitter_velocity_formula
 
     n = 4000
-    got = emitter._velocities(np.random.default_rng(3), n)
+    got = emitter._velocities(np.random.default_rng(3), n, emitter._cone())
     assert got.tobytes() == emitter_velocity_formula(emitter, np.random.default_rng(3),
                                                      n).tobytes()
 

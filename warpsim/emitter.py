@@ -17,7 +17,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from . import validation as check
-from .blocks import for_row_blocks, stream_at, uniform_rows
+from .blocks import for_row_blocks, row_streams, uniform_rows
 from .obstacles import RoundedBoxes
 from .swarm import Swarm
 
@@ -198,7 +198,7 @@ class Emitter:
         return self.spawn_many(boxes, [n], [seed], dt)[0]
 
     def spawn_many(self, boxes: RoundedBoxes, counts, seeds,
-                   dt: float | None = None) -> list[Swarm]:
+                   dt: float | None = None, join: bool = False) -> list[Swarm]:
         """Draw several swarms at once: ``[spawn(boxes, n, seed, dt) for n, seed in
         zip(counts, seeds)]``, the same arrays bit for bit, with the clearance of every swarm's
         pending spheres tested in one query per round (a sharded draw of many small blocks).
@@ -207,11 +207,15 @@ class Emitter:
             boxes: the obstacles (never modified).
             counts, seeds: one ``n`` (>= 1) and one ``seed`` (>= 0) per swarm, already checked.
             dt: as :meth:`spawn`'s.
+            join: return one swarm, those swarms one after the other (the same arrays as
+                their concatenation), checked and marked clear of ``boxes`` once instead of
+                swarm by swarm (a sharded draw's blocks, about 0.3 ms a block saved).
 
         Raises:
             ValueError: as :meth:`spawn`, for the first swarm that cannot be placed.
         """
         self._check_radius_fits(boxes)
+        cone = self._cone()
         parts = []
         for n, seed in zip(counts, seeds, strict=True):
             # One independent stream per quantity: changing the velocity rule leaves the
@@ -220,7 +224,7 @@ class Emitter:
                 np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4))
             radius = uniform_rows(radius_rng, *self.radius, n)
             mass = uniform_rows(mass_rng, *self.mass, n)
-            velocity = self._velocities(velocity_rng, n)
+            velocity = self._velocities(velocity_rng, n, cone)
             births = 0
             if self.emits_over_time:
                 if dt is None:
@@ -230,6 +234,14 @@ class Emitter:
             parts.append((radius, mass, velocity, births, position_rng))
         positions = self._positions([rng for *_, rng in parts], boxes,
                                     [radius for radius, *_ in parts])
+        if join and len(parts) > 1:
+            births = [np.broadcast_to(np.asarray(b), r.shape) for r, _, _, b, _ in parts]
+            parts = [(np.concatenate([part[0] for part in parts]),
+                      np.concatenate([part[1] for part in parts]),
+                      np.concatenate([part[2] for part in parts]),
+                      np.concatenate(births) if any(np.ndim(b) for *_, b, _ in parts) else 0,
+                      None)]
+            positions = [np.concatenate(positions)]
         spin = np.asarray(self.angular_momentum, dtype=np.float64)
         still = not spin.any() and not np.signbit(spin).any()  # +0.0 each: the Swarm default
         swarms = [Swarm(position=position, velocity=velocity, radius=radius, mass=mass,
@@ -263,35 +275,42 @@ class Emitter:
                 f"fits nowhere: no point of the region ({self._region()}) is farther than "
                 f"{bound[k]:.3g} m from box {k}; use smaller spheres or move the region")
 
-    def _velocities(self, rng: np.random.Generator, n: int) -> np.ndarray:
+    def _cone(self) -> tuple:
+        """``(cos(cone), axis, u, w)``: the cone of the speeds' directions and an orthonormal
+        frame around its unit axis (None without a speed); the same for every swarm drawn."""
+        if self.speed is None:
+            return None
+        axis = np.asarray(self.direction) / np.linalg.norm(self.direction)
+        return (math.cos(math.radians(self.cone_deg)), axis, *_orthonormal_pair(axis))
+
+    def _velocities(self, rng: np.random.Generator, n: int, cone: tuple | None) -> np.ndarray:
         """``n`` velocities [m/s], (n, 3): the base velocity plus the jitter, plus a speed in a
-        direction uniform on the cone's cap, in the order of the expression ``v0 + j * U + s *
-        (c a + (q cos phi) u + (q sin phi) w)``. The draws are those of one serial draw from
-        ``rng`` (U, then s, cos(theta) and phi, ``n`` each), and ``rng`` is left where that
-        draw would leave it; the rows are computed in blocks on every core
-        (:func:`warpsim.blocks.for_row_blocks`), the arithmetic in place in each block."""
-        state = rng.bit_generator.state
+        direction uniform on the cone's cap (``cone``: :meth:`_cone`), in the order of the
+        expression ``v0 + j * U + s * (c a + (q cos phi) u + (q sin phi) w)``. The draws are
+        those of one serial draw from ``rng`` (U, then s, cos(theta) and phi, ``n`` each), and
+        ``rng`` is left where that draw would leave it; the rows are computed in blocks on
+        every core (:func:`warpsim.blocks.for_row_blocks`), the arithmetic in place in each
+        block."""
+        stream, done = row_streams(rng, n)
         jitter = np.asarray(self.velocity_jitter, dtype=np.float64)
         base = np.asarray(self.velocity, dtype=np.float64)
         velocity = np.empty((n, 3))
-        if self.speed is not None:
-            cos_cone = math.cos(math.radians(self.cone_deg))
-            axis = np.asarray(self.direction) / np.linalg.norm(self.direction)
-            u, w = _orthonormal_pair(axis)
+        if cone is not None:
+            cos_cone, axis, u, w = cone
 
         def block(rows: slice) -> None:
             m = rows.stop - rows.start
             v = velocity[rows]
-            v[...] = stream_at(state, 3 * rows.start).uniform(-1.0, 1.0, size=(m, 3))
+            v[...] = stream(3 * rows.start).uniform(-1.0, 1.0, size=(m, 3))
             v *= jitter
             np.add(base, v, out=v)
-            if self.speed is None:
+            if cone is None:
                 return
-            speed = stream_at(state, 3 * n + rows.start).uniform(*self.speed, size=m)
+            speed = stream(3 * n + rows.start).uniform(*self.speed, size=m)
             # Uniform on the spherical cap: cos(theta) uniform in [cos(cone), 1], azimuth
             # uniform.
-            cos_theta = stream_at(state, 4 * n + rows.start).uniform(cos_cone, 1.0, size=m)
-            phi = stream_at(state, 5 * n + rows.start).uniform(0.0, 2.0 * math.pi, size=m)
+            cos_theta = stream(4 * n + rows.start).uniform(cos_cone, 1.0, size=m)
+            phi = stream(5 * n + rows.start).uniform(0.0, 2.0 * math.pi, size=m)
             sin_theta = np.multiply(cos_theta, cos_theta)
             np.subtract(1.0, sin_theta, out=sin_theta)
             np.maximum(0.0, sin_theta, out=sin_theta)
@@ -310,7 +329,7 @@ class Emitter:
             v += d
 
         for_row_blocks(n, block)
-        rng.bit_generator.advance((3 if self.speed is None else 6) * n)
+        done((3 if cone is None else 6) * n)
         return velocity
 
     def _positions(self, rngs: list, boxes: RoundedBoxes,
@@ -368,17 +387,16 @@ def _uniform_in_box(rng: np.random.Generator, n: int, center: np.ndarray,
                     half: np.ndarray) -> np.ndarray:
     """``center + half * rng.uniform(-1.0, 1.0, size=(n, 3))`` bit for bit, ``rng`` left where
     that draw leaves it, the rows computed in blocks on every core."""
-    state = rng.bit_generator.state
+    stream, done = row_streams(rng, n)
     out = np.empty((n, 3))
 
     def block(rows: slice) -> None:
-        draw = stream_at(state, 3 * rows.start).uniform(-1.0, 1.0,
-                                                         size=(rows.stop - rows.start, 3))
+        draw = stream(3 * rows.start).uniform(-1.0, 1.0, size=(rows.stop - rows.start, 3))
         draw *= half
         np.add(center, draw, out=out[rows])
 
     for_row_blocks(n, block)
-    rng.bit_generator.advance(3 * n)
+    done(3 * n)
     return out
 
 

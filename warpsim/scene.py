@@ -9,6 +9,7 @@ from . import validation as check
 from .emitter import Emitter
 from .obstacles import RoundedBoxes
 from .scene_files import SceneFileError, read_scene_file
+from .swarm import joined_swarms
 
 DEFAULT_GRAVITY = (0.0, -9.81, 0.0)
 
@@ -136,10 +137,11 @@ class Scene:
             raise SceneFileError(f"{os.path.basename(self.source)}: {exc}") from exc
         return swarm
 
-    def spawn_many(self, counts, seeds, dt: float | None = None) -> list:
+    def spawn_many(self, counts, seeds, dt: float | None = None, join: bool = False) -> list:
         """Several swarms of this scene's emitter at once, each as ``spawn(n, seed, dt)`` gives
         it bit for bit (:meth:`warpsim.Emitter.spawn_many`: the clearance of all of them tested
-        together); ``counts`` (each >= 1) and ``seeds`` (each >= 0) pair up.
+        together); ``counts`` (each >= 1) and ``seeds`` (each >= 0) pair up. ``join``: one
+        swarm, those one after the other (:meth:`warpsim.Emitter.spawn_many`'s ``join``).
 
         Raises:
             ValueError: as :meth:`spawn`.
@@ -149,11 +151,13 @@ class Scene:
         counts = [check.positive_int("n", n) for n in counts]
         seeds = [check.positive_int("seed", seed, minimum=0) for seed in seeds]
         if not isinstance(self.emitter, Emitter):
-            return [self.spawn(n, seed, dt) for n, seed in zip(counts, seeds, strict=True)]
+            swarms = [self.spawn(n, seed, dt) for n, seed in zip(counts, seeds, strict=True)]
+            return [joined_swarms(swarms)] if join else swarms
         try:
             return self.emitter.spawn_many(
                 self.boxes, counts, seeds,
-                (self.dt if dt is None else dt) if self.emitter.emits_over_time else None)
+                (self.dt if dt is None else dt) if self.emitter.emits_over_time else None,
+                join=join)
         except ValueError as exc:
             if self.source is None:
                 raise

@@ -75,6 +75,20 @@ class Swarm:
         return f"Swarm({len(self)} spheres)"
 
 
+#: The arrays a swarm holds, by its constructor's argument names.
+FIELDS = ("position", "velocity", "radius", "mass", "angular_momentum", "orientation",
+          "birth_frame")
+
+
+def joined_swarms(swarms: list[Swarm]) -> Swarm:
+    """The swarms one after the other, in one swarm (not marked clear of any boxes: see
+    :meth:`Swarm._mark_clear_of`)."""
+    if len(swarms) == 1:
+        return swarms[0]
+    return Swarm(**{name: np.concatenate([getattr(s, name) for s in swarms])
+                    for name in FIELDS})
+
+
 def _placement_digest(swarm: Swarm, boxes) -> bytes:
     """The digest of what whether a sphere starts inside a box depends on: the spheres'
     centres and radii, the boxes' centres, half extents, rotations and radii."""

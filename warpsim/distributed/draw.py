@@ -24,7 +24,7 @@ import numpy as np
 
 from .. import validation as check
 from ..scene import Scene
-from ..swarm import Swarm
+from ..swarm import FIELDS, Swarm
 
 DEFAULT_BLOCK = 1024
 """Spheres per block of the sharded draw. Measured on the room scene: drawing a block costs
@@ -149,12 +149,12 @@ def shard_swarm(scene: Scene, n: int | None, seed: int | None, start: int, stop:
     dt = scene.dt if dt is None else dt
     blocks = range(start // block, block_count(stop, block))
     sizes = [min(block, n - b * block) for b in blocks]
-    parts = scene.spawn_many(sizes, [block_seed(seed, b) for b in blocks], dt=dt)
-    if getattr(scene.emitter, "emits_over_time", False):
-        parts = [_with(part, scene.boxes,
-                       birth_frame=scene.emitter.birth_frames(dt, n, b * block, size))
-                 for part, b, size in zip(parts, blocks, sizes, strict=True)]
-    return _joined(parts, scene.boxes)
+    (swarm,) = scene.spawn_many(sizes, [block_seed(seed, b) for b in blocks], dt=dt, join=True)
+    if getattr(scene.emitter, "emits_over_time", False):  # births counted in the whole swarm
+        swarm = _with(swarm, scene.boxes, birth_frame=np.concatenate(
+            [scene.emitter.birth_frames(dt, n, b * block, size)
+             for b, size in zip(blocks, sizes, strict=True)]))
+    return swarm
 
 
 def sharded_spawn(scene: Scene, n: int | None = None, seed: int | None = None,
@@ -181,9 +181,6 @@ def may_start_free(scene: Scene) -> bool:
     return reaches_beyond_bounds(scene.boxes, center + half - r_min, center - half + r_min)
 
 
-SWARM_FIELDS = ("position", "velocity", "radius", "mass", "angular_momentum", "orientation",
-                "birth_frame")
-
 
 def _placed(swarm: Swarm) -> bool:
     """Whether a swarm this module has just drawn with the scene's emitter carries the
@@ -197,20 +194,8 @@ def _with(swarm: Swarm, boxes, **changes) -> Swarm:
     """``swarm``, just drawn for ``boxes``, with some fields changed; marked clear of
     ``boxes`` when it was placed outside them and neither its positions nor its radii
     changed."""
-    out = Swarm(**{name: changes.get(name, getattr(swarm, name)) for name in SWARM_FIELDS})
+    out = Swarm(**{name: changes.get(name, getattr(swarm, name)) for name in FIELDS})
     if _placed(swarm) and not {"position", "radius"} & changes.keys():
-        out._mark_clear_of(boxes)
-    return out
-
-
-def _joined(parts: list[Swarm], boxes) -> Swarm:
-    """The parts, just drawn for ``boxes``, one after the other; marked clear of ``boxes``
-    when every part was placed outside them."""
-    if len(parts) == 1:
-        return parts[0]
-    out = Swarm(**{name: np.concatenate([getattr(p, name) for p in parts])
-                   for name in SWARM_FIELDS})
-    if all(_placed(part) for part in parts):
         out._mark_clear_of(boxes)
     return out
 
