@@ -158,7 +158,9 @@ def frame_kernel(features: Features):
     integrate_orientation = dyn.integrate_orientation
     orientation_step = dyn.orientation_step
     turned = dyn.turned
-    arc_point = arc_funcs(p).arc_point
+    # the arc's functions only where a ballistic frame calls them: a linear variant builds
+    # none of them (each @wp.func is parsed when it is made)
+    arc_point = arc_funcs(p).arc_point if motion == "ballistic" else None
     ZERO = scalar(0.0)
     HALF = scalar(0.5)
     EIGHTH = scalar(0.125)
