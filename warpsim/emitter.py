@@ -235,11 +235,11 @@ class Emitter:
         positions = self._positions([rng for *_, rng in parts], boxes,
                                     [radius for radius, *_ in parts])
         if join and len(parts) > 1:
-            births = [np.broadcast_to(np.asarray(b), r.shape) for r, _, _, b, _ in parts]
+            born = [np.broadcast_to(np.asarray(b), r.shape) for r, _, _, b, _ in parts]
             parts = [(np.concatenate([part[0] for part in parts]),
                       np.concatenate([part[1] for part in parts]),
                       np.concatenate([part[2] for part in parts]),
-                      np.concatenate(births) if any(np.ndim(b) for *_, b, _ in parts) else 0,
+                      np.concatenate(born) if any(np.ndim(b) for *_, b, _ in parts) else 0,
                       None)]
             positions = [np.concatenate(positions)]
         spin = np.asarray(self.angular_momentum, dtype=np.float64)
@@ -275,7 +275,7 @@ class Emitter:
                 f"fits nowhere: no point of the region ({self._region()}) is farther than "
                 f"{bound[k]:.3g} m from box {k}; use smaller spheres or move the region")
 
-    def _cone(self) -> tuple:
+    def _cone(self) -> tuple | None:
         """``(cos(cone), axis, u, w)``: the cone of the speeds' directions and an orthonormal
         frame around its unit axis (None without a speed); the same for every swarm drawn."""
         if self.speed is None:

@@ -181,7 +181,6 @@ def may_start_free(scene: Scene) -> bool:
     return reaches_beyond_bounds(scene.boxes, center + half - r_min, center - half + r_min)
 
 
-
 def _placed(swarm: Swarm) -> bool:
     """Whether a swarm this module has just drawn with the scene's emitter carries the
     emitter's mark of a placement outside the scene's boxes (an :class:`warpsim.Emitter`
