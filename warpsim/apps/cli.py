@@ -656,17 +656,16 @@ def fast_exit(code: int) -> None:
     ``atexit`` handlers, without the interpreter's teardown (see :func:`console`)."""
     import atexit
 
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):  # a closed pipe (``| head``) or a closed stream
-            pass
+    def flush() -> None:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):  # a closed pipe (``| head``) or a closed stream
+                pass
+
+    flush()
     atexit._run_exitfuncs()
-    for stream in (sys.stdout, sys.stderr):  # what the handlers wrote
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
+    flush()  # what the handlers wrote
     os._exit(code)
 
 
