@@ -48,6 +48,8 @@ init_warp(debug=False)
 from warpsim import export
 from warpsim.export import usd_write  # noqa: F401 - loads pxr, as the command's output does
 t["imports"] = time.perf_counter() - t0
+import gc
+gc.freeze()  # as the command does before it runs (warpsim.apps.cli.console)
 scene_name, out = sys.argv[1], sys.argv[5]
 n, frames, every = (int(a) for a in sys.argv[2:5])
 t0 = time.perf_counter()

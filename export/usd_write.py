@@ -528,8 +528,10 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
                 if hidden_before is None or hidden != hidden_before:
                     layer.SetTimeSample(paths["invisibleIds"], time, hidden)
                 hidden_before = hidden
-            layer.SetTimeSample(paths["positions"], time,
-                                vec3(chosen(trajectory.position[row]) - origin))
+            position = chosen(trajectory.position[row])  # [m], as the trajectory holds it
+            if "origin" in paths:  # no float64 copy to take 0 off every coordinate
+                position = position - origin
+            layer.SetTimeSample(paths["positions"], time, vec3(position))
             raw = np.asarray(trajectory.orientation[row])
             if turned is None or not same_bits(raw, turned):
                 # Each precision rounded from the source values (no double rounding via

@@ -363,6 +363,39 @@ def test_a_system_exit_with_a_message_is_code_1_and_the_message(monkeypatch, cap
     assert capsys.readouterr().err == "warpsim: something said why\n"
 
 
+def test_the_command_leaves_what_its_imports_made_out_of_the_collections(monkeypatch):
+    """The console script freezes the objects that exist before its command runs, so full
+    collections during a run do not walk the imports' objects again; objects made after are
+    still collected (a cycle made during the command is freed)."""
+    import gc
+    import weakref
+
+    from warpsim.apps import cli as cli_module
+
+    class Node:
+        pass
+
+    freed = []
+
+    def command():
+        assert gc.get_freeze_count() > 0, "frozen before the command runs"
+        node = Node()
+        node.self = node  # a cycle: only the collector frees it
+        weakref.finalize(node, freed.append, True)
+        del node
+        gc.collect()
+        return 0
+
+    monkeypatch.setattr(cli_module, "main", command)
+    monkeypatch.setattr(cli_module, "fast_exit", lambda code: None)
+    gc.unfreeze()
+    try:
+        cli_module.console()
+    finally:
+        gc.unfreeze()  # this test process goes on
+    assert freed == [True]
+
+
 def test_a_long_kernel_build_says_what_the_run_waits_for(tmp_path, capsys, monkeypatch):
     """A build longer than ``BUILD_NOTICE_S`` (a first build on a slow machine) is named
     on standard error while it runs; a quick one says nothing."""

@@ -197,6 +197,32 @@ def test_nearest_is_the_brute_force_minimum_bit_for_bit(seed, monkeypatch):
     np.testing.assert_array_equal(index, expected_index)
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_candidate_pairs_are_each_point_box_pair_whose_bounds_hold_the_point_once(seed,
+                                                                                   monkeypatch):
+    """The pairs the nearest-box query evaluates: every (point, box) with the point inside the
+    box's bounds, once, and no other (against a test of every pair), through every grid level
+    and chunk boundary."""
+    rng = np.random.default_rng(100 + seed)
+    if seed % 2:
+        monkeypatch.setattr(obstacles, "PAIR_CHUNK", int(rng.integers(1, 50)))
+        monkeypatch.setattr(obstacles, "DIRECT_BOXES", int(rng.integers(0, 3)))
+    boxes = _mixed_boxes(rng, int(rng.integers(1, 300)))
+    points = np.concatenate([rng.uniform(-40.0, 40.0, (500, 3)),
+                             boxes.center[rng.integers(0, len(boxes), 40)]])
+    reach = boxes.world_extent() + rng.uniform(0.0, 2.0)
+    lo, hi = boxes.center - reach, boxes.center + reach
+    lo[0] = hi[0] = points[0]  # a box whose bounds are one point, and a point on them
+    pairs = [np.stack(pair, axis=1) for pair in
+             obstacles._candidate_pairs(lo, hi, np.arange(len(boxes)), points)]
+    got = np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
+    held = ((points[:, None, :] >= lo[None]) & (points[:, None, :] <= hi[None])).all(axis=2)
+    expected = np.argwhere(held)
+    assert all(pair.shape[0] <= obstacles.PAIR_CHUNK for pair in pairs)
+    assert got.shape == expected.shape  # no pair twice, none missing, none extra
+    np.testing.assert_array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], expected)
+
+
 def test_nearest_ties_take_the_lowest_index_and_copies_are_found():
     boxes = ws.RoundedBoxes(center=[[0.0, 0.0, 0.0]] * 3 + [[5.0, 0.0, 0.0]],
                             half_extents=[[1.0, 1.0, 1.0]] * 4)
