@@ -396,6 +396,38 @@ def test_the_command_leaves_what_its_imports_made_out_of_the_collections(monkeyp
     assert freed == [True]
 
 
+@pytest.mark.parametrize("start", [0, 3])
+def test_a_run_with_events_builds_the_plain_kernel_only_to_step_to_its_start(tmp_path, capsys,
+                                                                            monkeypatch, start):
+    """``--events`` records every simulated frame's contacts, so the command builds the kernel
+    with the contact code alone (a first build of one kernel, not two), and the plain one too
+    when it steps to ``--start`` first; the events it writes are the library's run's."""
+    builds = []
+    real_build = ws.Simulator.build
+
+    def spy(self, events=False, plain=True):
+        builds.append((events, plain))
+        return real_build(self, events=events, plain=plain)
+
+    monkeypatch.setattr(ws.Simulator, "build", spy)
+    pytest.importorskip("pyarrow")
+    table = tmp_path / "hits.parquet"
+    code, _, err = cli(capsys, "run", "wedge", "-n", 40, "--frames", 30, "--start", start,
+                       "--seed", 5, "-o", tmp_path / "a.usdc", "--events", table,
+                       "--no-progress")
+    assert code == 0, err
+    assert builds == [(True, start > 0)]
+    scene = ws.Scene.load("wedge")
+    sim = ws.Simulator(scene, sharded_spawn(scene, 40, 5))
+    if start:
+        sim.step(start)
+    expected = sim.run(30 - start, events=True).events
+    written = ws.ContactEvents.read_parquet(table)
+    assert len(written) == len(expected) > 0
+    np.testing.assert_array_equal(written.frame, expected.frame)
+    np.testing.assert_array_equal(written.position, expected.position)
+
+
 def test_a_long_kernel_build_says_what_the_run_waits_for(tmp_path, capsys, monkeypatch):
     """A build longer than ``BUILD_NOTICE_S`` (a first build on a slow machine) is named
     on standard error while it runs; a quick one says nothing."""
@@ -405,9 +437,9 @@ def test_a_long_kernel_build_says_what_the_run_waits_for(tmp_path, capsys, monke
 
     real_build = ws.Simulator.build
 
-    def slow_build(self, events=False):
+    def slow_build(self, events=False, plain=True):
         time.sleep(0.3)
-        return real_build(self, events=events)
+        return real_build(self, events=events, plain=plain)
 
     monkeypatch.setattr(ws.Simulator, "build", slow_build)
     monkeypatch.setattr(cli_module, "BUILD_NOTICE_S", 0.05)

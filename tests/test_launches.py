@@ -130,6 +130,37 @@ def test_shards_build_their_kernel_once_before_their_threads_launch(monkeypatch,
     assert first_loads == [threading.current_thread().name]
 
 
+@pytest.mark.parametrize("events,plain", [(False, True), (True, True), (True, False)])
+def test_build_loads_the_kernels_asked_for_and_no_other(monkeypatch, events, plain):
+    """``build`` loads the plain kernel (what ``step`` launches) and, with ``events``, the one
+    with the contact code, or with ``plain=False`` that one alone; a run with events then
+    launches only the kernel built; nothing to build is refused."""
+    import warp as wp
+
+    from warpsim.kernels.frame_kernel import frame_kernel
+
+    scene = ws.Scene.load("room")
+    sim = ws.Simulator(scene, scene.spawn(n=60, seed=3), device="cpu")
+    modules = {"plain": sim._kernel.module,
+               "events": frame_kernel(sim._features.but(events=True)).module}
+    loaded = []
+    real = wp.load_module
+
+    def spy(module, device=None):
+        loaded.append(next(name for name, m in modules.items() if m is module))
+        return real(module, device=device)
+
+    monkeypatch.setattr(wp, "load_module", spy)
+    sim.build(events=events, plain=plain)
+    assert loaded == [name for name, on in (("plain", plain), ("events", events)) if on]
+    if events:
+        assert len(sim.run(20, events=True).events) >= 0
+    with pytest.raises(ValueError, match="^build: events and plain are both false"):
+        sim.build(events=False, plain=False)
+    with pytest.raises(ValueError, match="plain must be true or false"):
+        sim.build(plain=1)
+
+
 @pytest.mark.parametrize("workers", [1, 2])
 def test_stepping_reads_the_states_the_simulator_holds_now(workers):
     """``step`` packs its launch's arguments once per pair of states: a state set with

@@ -313,18 +313,32 @@ class Simulator:
 
     # -- stepping -----------------------------------------------------------------------------
 
-    def build(self, events: bool = False) -> float:
-        """Build (or load from Warp's cache) this simulator's kernel now; returns seconds.
+    def build(self, events: bool = False, plain: bool = True) -> float:
+        """Build (or load from Warp's cache) this simulator's kernels now; returns seconds.
 
         :meth:`step` and :meth:`run` do it on first use anyway; calling it first keeps the build
         time out of a timed run.
 
         Args:
-            events: also build the variant that records contacts (``run(events=True)``).
+            events: also build the variant that records contacts (what ``run(events=True)``
+                launches).
+            plain: build the kernel without the contact code (what :meth:`step` and
+                :meth:`run` without events launch). ``build(events=True, plain=False)`` builds
+                the variant with events alone, for a program whose every frame records its
+                contacts: a first build then compiles one kernel, not two.
+
+        Raises:
+            ValueError: ``events`` and ``plain`` both false (nothing to build).
         """
+        events = check.flag("events", events)
+        plain = check.flag("plain", plain)
+        if not (events or plain):
+            raise ValueError("build: events and plain are both false, so there is nothing to "
+                             "build")
         start = time.perf_counter()
-        wp.load_module(self._kernel.module, device=self.device)
-        if check.flag("events", events):
+        if plain:
+            wp.load_module(self._kernel.module, device=self.device)
+        if events:
             kernel = frame_kernel(self._features.but(events=True))
             wp.load_module(kernel.module, device=self.device)
         return time.perf_counter() - start

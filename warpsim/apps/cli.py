@@ -417,7 +417,9 @@ def _cmd_run(args) -> int:
     print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "
           f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
           f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
-    build = _build_with_notice(sim, bool(args.events))  # reported apart from the run's speed
+    # reported apart from the run's speed; with --events every recorded frame is run by the
+    # kernel with the contact code, and the plain one only steps to --start
+    build = _build_with_notice(sim, bool(args.events), plain=not args.events or start > 0)
     if start:
         sim.step(start)
     if args.rerun is not None:  # also samples the energy and the counters at each record
@@ -545,9 +547,9 @@ def _cmd_preview(args) -> int:
     return 0
 
 
-def _build_with_notice(sim, events: bool) -> float:
-    """``sim.build(events)``, saying on standard error what the command waits for when the
-    build takes more than ``BUILD_NOTICE_S`` seconds; returns the build's seconds."""
+def _build_with_notice(sim, events: bool, plain: bool = True) -> float:
+    """``sim.build(events, plain)``, saying on standard error what the command waits for when
+    the build takes more than ``BUILD_NOTICE_S`` seconds; returns the build's seconds."""
     import threading
 
     def notice():
@@ -559,7 +561,7 @@ def _build_with_notice(sim, events: bool) -> float:
     timer.daemon = True
     timer.start()
     try:
-        return sim.build(events=events)
+        return sim.build(events=events, plain=plain)
     finally:
         timer.cancel()
 
