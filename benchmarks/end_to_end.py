@@ -13,7 +13,8 @@ spheres), is timed two ways, the two taking turns ``R`` times in fresh processes
    (``Scene.load``), ``draw`` (the sharded draw of the swarm the command simulates),
    ``set-up`` (``Simulator``: checks, broad phase, upload), ``build`` (the kernel, from Warp's
    cache), ``simulation`` (``Simulator.run``, the recorded frames copied out) and ``output``
-   (``export.write_usd``).
+   (``export.write_usd``); the garbage collector's objects are frozen after the imports, as
+   the command freezes them before it runs (``warpsim.apps.cli.console``).
 
 Both run outside the source tree, so that they import the installed package (or the one
 ``PYTHONPATH`` names: the same benchmark for another checkout). The table gives the median
