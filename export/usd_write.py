@@ -548,7 +548,7 @@ def _author_spheres(stage: Usd.Stage, trajectory: Trajectory, rows: np.ndarray,
             if velocity is not None:
                 layer.SetTimeSample(paths["velocities"], time, vec3(chosen(velocity[row])))
             if angular is not None:
-                degrees = np.asarray(angular[row], dtype=np.float64)[idx] * DEGREES_PER_RADIAN
+                degrees = chosen(np.asarray(angular[row], dtype=np.float64)) * DEGREES_PER_RADIAN
                 layer.SetTimeSample(paths["angularVelocities"], time, vec3(degrees))
 
 

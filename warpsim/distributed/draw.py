@@ -125,7 +125,7 @@ def spawn_block(scene: Scene, n: int | None, seed: int | None, index: int,
     swarm = scene.spawn(n=size, seed=block_seed(seed, index), dt=dt)
     if not getattr(scene.emitter, "emits_over_time", False):
         return swarm
-    return _with(swarm, scene.boxes,
+    return _with(swarm,
                  birth_frame=scene.emitter.birth_frames(dt, n, index * block, size))
 
 
@@ -151,7 +151,7 @@ def shard_swarm(scene: Scene, n: int | None, seed: int | None, start: int, stop:
     sizes = [min(block, n - b * block) for b in blocks]
     (swarm,) = scene.spawn_many(sizes, [block_seed(seed, b) for b in blocks], dt=dt, join=True)
     if getattr(scene.emitter, "emits_over_time", False):  # births counted in the whole swarm
-        swarm = _with(swarm, scene.boxes, birth_frame=np.concatenate(
+        swarm = _with(swarm, birth_frame=np.concatenate(
             [scene.emitter.birth_frames(dt, n, b * block, size)
              for b, size in zip(blocks, sizes, strict=True)]))
     return swarm
@@ -189,13 +189,13 @@ def _placed(swarm: Swarm) -> bool:
     return swarm._clear_of is not None
 
 
-def _with(swarm: Swarm, boxes, **changes) -> Swarm:
-    """``swarm``, just drawn for ``boxes``, with some fields changed; marked clear of
-    ``boxes`` when it was placed outside them and neither its positions nor its radii
-    changed."""
+def _with(swarm: Swarm, **changes) -> Swarm:
+    """``swarm``, just drawn, with some fields changed; it keeps the mark of its placement
+    outside the boxes when neither its positions nor its radii changed (the mark is the digest
+    of those and of the boxes, so it is carried over, not computed again)."""
     out = Swarm(**{name: changes.get(name, getattr(swarm, name)) for name in FIELDS})
     if _placed(swarm) and not {"position", "radius"} & changes.keys():
-        out._mark_clear_of(boxes)
+        out._clear_of = swarm._clear_of
     return out
 
 
