@@ -36,6 +36,11 @@ QUAD_REL_TOL = 2e-15
 #: integrands settle in under ten).
 QUAD_MAX_DEPTH = 40
 
+#: Panels an adaptive quadrature may evaluate before it is refused as not settling (an
+#: integrand whose rounding noise lies above ``QUAD_REL_TOL`` would otherwise bisect to
+#: ``QUAD_MAX_DEPTH`` everywhere: about 2^40 panels).
+QUAD_MAX_PANELS = 20_000
+
 #: Newton iterations allowed to invert t(q) (safeguarded; converges in under ten).
 NEWTON_MAX_ITER = 100
 
@@ -55,13 +60,17 @@ def integrate(f, a: float, b: float) -> float:
     """``int_a^b f`` by adaptive Gauss-Legendre (20 nodes per panel), ``f`` vectorised."""
     if b == a:
         return 0.0
+    panels = [0]
 
     def adapt(lo, hi, whole, depth):
         mid = 0.5 * (lo + hi)
         left, right = _panel(f, lo, mid), _panel(f, mid, hi)
         both = left + right
+        panels[0] += 2
         if not np.isfinite(both):
             raise ValueError("the integrand is not finite on the interval")
+        if panels[0] > QUAD_MAX_PANELS:
+            raise ValueError(f"the quadrature did not settle in {QUAD_MAX_PANELS} panels")
         if abs(both - whole) <= QUAD_REL_TOL * (abs(left) + abs(right)) or depth >= QUAD_MAX_DEPTH:
             return both
         return adapt(lo, mid, left, depth + 1) + adapt(mid, hi, right, depth + 1)
@@ -231,6 +240,9 @@ def cylinder_slide(axis_point, axis, R: float, x0, v0, g, t0: float = 0.0,
         return out
     cos_d = (2.0 * np.cos(q0) + R * w * w / G) / 3.0
     q_end = np.arccos(min(1.0, cos_d))
+    if q_end <= q0:  # lam0 is 0 but for rounding: the normal force vanishes at the start
+        out.extend(free_flight(x0, v0, g, t0))
+        return out
     end_kind = "flight"
     if exit_normal is not None:
         ne = _unit(exit_normal)
@@ -354,9 +366,16 @@ def sphere_slide(center, R: float, x0, v0, g, t0: float = 0.0) -> Trajectory:
         return float(dt_ds(s)) if s > 0.0 else np.inf
 
     def azimuth_of(s: float) -> float:
-        return integrate(lambda u: L / (R * R * (1.0 - (u0 - u * u) ** 2)) * dt_ds(u), 0.0, s)
+        # 1 - u^2 at u = u0 - s^2 as a0 + s^2 (2 u0 - s^2): written as 1 - (u0 - s^2)^2 it
+        # cancels near the top (a0 small), and its rounding noise, above the quadrature's
+        # tolerance, kept every panel from settling
+        return integrate(lambda w: L / (R * R * (a0 + w * w * (2.0 * u0 - w * w))) * dt_ds(w),
+                         0.0, s)
 
     u_d = (2.0 * u0 + v2 / (G * R)) / 3.0
+    if u_d >= u0:  # lambda is 0 but for rounding: the normal force vanishes at the start
+        out.extend(free_flight(x0, v0, g, t0))
+        return out
     s_end = np.sqrt(u0 - u_d)
     t_end = time_of(s_end)
 

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import support_analytic as sa
 from helpers import examples
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from test_ballistic_path import GRAVITY, MAX_BOUNCES, run
 
@@ -454,9 +454,17 @@ def random_slide_errors(precision, half, rb, r, tilt, tilt_axis, yaw, start, spe
     truth = reference.simulate(scene, ws.Swarm(position=[x0], velocity=[v0], radius=r),
                                float(times[-1]), dense)
     assert not truth.incomplete.any()
-    assert not len(truth.events.of_sphere(0).bounces())
+    # a flight off an edge can land on the next face down (one that slopes less steeply than
+    # a wall): that landing is a bounce, and the frames from it on belong to the bounce tests
+    # (its hops down that face may fill a long frame up to the cap): the kernel runs the frames
+    # that end before it
+    bounces = truth.events.of_sphere(0).bounces()
+    landed = float(bounces.time[0]) if len(bounces) else np.inf
+    times = times[times < landed]
+    if not times.size:
+        return np.zeros(0), np.zeros(0, bool)
     x_in = x0.astype(np.dtype(precision)).astype(float)
-    out = run(box, x_in[None], v0[None], frames, dt, precision, radius=r, record=True)
+    out = run(box, x_in[None], v0[None], times.size, dt, precision, radius=r, record=True)
     assert out["capped"].sum() == 0
     gap, on_face = box_gap(box, truth.position[:, 0])
     ridden = np.maximum.accumulate((np.abs(gap - (rb + r)) < ON_SURFACE) & ~on_face)
@@ -477,6 +485,12 @@ SLIDES = dict(half=st.tuples(st.floats(0.2, 1.5), st.floats(0.1, 1.0), st.floats
 
 @settings(max_examples=examples(24))
 @given(far=st.sampled_from([0.0, 0.0, 3.0e3]), **SLIDES)
+# off a narrow box's edge, a flight that lands on the side face below it at 0.578 s
+@example(far=0.0, half=(0.25, 1.0, 1.0), rb=0.0, r=0.05, tilt=0.5, tilt_axis=0.0, yaw=2.0,
+         start=(0.0, 0.0), speed=2.0, heading=0.5, dt=1 / 960)
+# the same in frames of 0.4 s: the frame of the landing would fill up to the cap
+@example(far=0.0, half=(0.34375, 1.0, 1.0), rb=0.0, r=0.05, tilt=0.53125, tilt_axis=1.5,
+         yaw=0.5, start=(0.0, 0.0), speed=2.0625, heading=0.5, dt=0.4)
 def test_random_slides_on_rotated_boxes_match_the_reference(far, **case):
     """A sphere put on the top face of a box turned about the vertical and tilted up to 34
     degrees about a random horizontal axis (sharp or rounded, at the origin or 3 km away),
