@@ -223,6 +223,31 @@ def test_candidate_pairs_are_each_point_box_pair_whose_bounds_hold_the_point_onc
     np.testing.assert_array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], expected)
 
 
+def test_a_point_whose_cell_lists_more_boxes_than_a_chunk_is_split_across_chunks(monkeypatch):
+    """Sixty copies of a box and a few others, seven pairs a chunk: a point among the copies
+    has sixty pairs, which span chunks; every chunk holds at most seven, and the pairs and the
+    nearest boxes are those of a test of every pair."""
+    monkeypatch.setattr(obstacles, "PAIR_CHUNK", 7)
+    monkeypatch.setattr(obstacles, "DIRECT_BOXES", 0)
+    rng = np.random.default_rng(5)
+    centers = np.concatenate([np.zeros((60, 3)), rng.uniform(-5.0, 5.0, (12, 3))])
+    boxes = ws.RoundedBoxes(center=centers, half_extents=np.full((72, 3), 0.5), radius=0.1)
+    points = np.concatenate([rng.uniform(-0.7, 0.7, (5, 3)), rng.uniform(-6.0, 6.0, (40, 3))])
+    reach = boxes.world_extent() + 0.3
+    lo, hi = boxes.center - reach, boxes.center + reach
+    pairs = [np.stack(pair, axis=1) for pair in
+             obstacles._candidate_pairs(lo, hi, np.arange(len(boxes)), points)]
+    assert all(pair.shape[0] <= 7 for pair in pairs)
+    got = np.concatenate(pairs)
+    held = ((points[:, None, :] >= lo[None]) & (points[:, None, :] <= hi[None])).all(axis=2)
+    assert held[:5, :60].all()  # the first points have sixty pairs each
+    np.testing.assert_array_equal(got[np.lexsort((got[:, 1], got[:, 0]))], np.argwhere(held))
+    distance, index = boxes.nearest(points, 0.3)
+    expected_distance, expected_index = _brute_nearest(boxes, points, 0.3)
+    np.testing.assert_array_equal(distance, expected_distance)
+    np.testing.assert_array_equal(index, expected_index)
+
+
 def test_nearest_ties_take_the_lowest_index_and_copies_are_found():
     boxes = ws.RoundedBoxes(center=[[0.0, 0.0, 0.0]] * 3 + [[5.0, 0.0, 0.0]],
                             half_extents=[[1.0, 1.0, 1.0]] * 4)

@@ -344,19 +344,18 @@ def _candidate_pairs(lo: np.ndarray, hi: np.ndarray, ids: np.ndarray, points: np
     count = np.searchsorted(keys, point_keys, side="right") - begin
     has = count > 0
     inside, begin, count = inside[has], begin[has], count[has]
+    # the pairs in order (point by point, each point's cell list in order), numbered from 0,
+    # PAIR_CHUNK at a time: a point whose cell lists more boxes than that spans chunks
     total = np.cumsum(count)
-    start = 0
-    while start < inside.shape[0]:  # whole points per chunk, about PAIR_CHUNK pairs each
-        done = total[start - 1] if start else 0
-        stop = max(int(np.searchsorted(total, done + PAIR_CHUNK, side="right")), start + 1)
-        c = count[start:stop]
-        pi = np.repeat(inside[start:stop], c)
-        at = np.repeat(begin[start:stop] - (np.cumsum(c) - c), c) + np.arange(c.sum())
-        bk = members[at]
+    pairs = int(total[-1]) if total.size else 0
+    for start in range(0, pairs, PAIR_CHUNK):
+        flat = np.arange(start, min(start + PAIR_CHUNK, pairs))
+        owner = np.searchsorted(total, flat, side="right")  # its point, among ``inside``
+        pi = inside[owner]
+        bk = members[begin[owner] + flat - (total[owner] - count[owner])]
         q = points[pi]  # the cell's boxes, kept where their bounds hold the point
         held = ((q >= lo[bk]) & (q <= hi[bk])).all(axis=1)
         yield pi[held], bk[held]
-        start = stop
     yield from _candidate_pairs(lo, hi, ids[~small], points)
 
 
