@@ -571,7 +571,7 @@ def test_reject_never_drops_a_hit():
                 assert out["each_hit"][i, k] == 1
                 assert out["each_s"][i, k] == pytest.approx(ref_s, abs=1e-9)
                 found += 1
-    assert found > 30
+    assert found > 10, found  # 24 to 54 in six draws: only that the check is not empty
 
 
 def test_point_never_crosses_a_plate(precision):

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import warp as wp
 from helpers import closed_room
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from test_arc_sweep import device_boxes
 
@@ -301,7 +301,8 @@ def tilted_plates():
 @pytest.mark.slow
 def test_error_does_not_depend_on_dt(precision):
     """Dropped onto tilted rounded plates (faces, rounded edges): the state after 1 s is the
-    same at four step sizes, and nobody is ever inside a box."""
+    same at four step sizes (float64 to 1e-9 m; float32 to its rounding as each sphere's
+    contacts amplify it), and nobody is ever inside a box."""
     rng = np.random.default_rng(7)
     boxes = tilted_plates()
     n = 128
@@ -316,8 +317,22 @@ def test_error_does_not_depend_on_dt(precision):
     err = np.abs(np.array(finals[:-1]) - finals[-1]).max(axis=2)
     if precision == "float64":
         assert err.max() <= 1e-9
-    else:  # float32: rounding of 4 m coordinates, amplified by a few edge contacts
-        assert np.median(err) <= 5e-5 and err.max() <= 5e-3
+    else:
+        # float32: the rounding of 4 m coordinates (spacing 4.8e-7 m; 240 frames of half a
+        # spacing, 6e-5 m, taken as 1e-4 m), amplified by the contacts. How much depends on
+        # the sphere: one that meets rounded edges several times can move its end by 1 mm for
+        # a start moved 1e-7 m (a seed of this test drew one whose float32 runs ended 4 cm
+        # apart). Each sphere's bound is 5 mm plus that rounding times its own amplification,
+        # measured on the float64 model (which agrees with itself to 1e-9 at every step size)
+        # from a start moved 1e-7 m in a random direction.
+        base = run(boxes, x, v, 240, 1 / 240, "float64", radius=0.1)["position"]
+        d = np.random.default_rng(1).normal(size=x.shape)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        moved = run(boxes, x + 1e-7 * d, v, 240, 1 / 240, "float64", radius=0.1)["position"]
+        amplification = np.linalg.norm(moved - base, axis=1) / 1e-7
+        assert np.median(err) <= 5e-5
+        assert np.all(err.max(axis=0) <= 5e-3 + 1e-4 * amplification), (
+            err.max(axis=0).max(), amplification[np.argmax(err.max(axis=0))])
 
 
 @pytest.mark.slow
@@ -348,9 +363,14 @@ def test_lossy_ball_settles_in_a_valley():
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), retention=st.sampled_from([1.0, 0.5]),
        dt=st.sampled_from([1 / 30, 1 / 60, 1 / 240]))
+# a lossy sphere whose last hops hold more than the cap of four in a frame of 1/30 s
+@example(seed=3, retention=0.5, dt=1 / 30)
 def test_invariants(seed, retention, dt):
     """Random swarms in the plates scene: no NaN, nobody inside a box, energy never gained
-    (tracked and of the state), the cap never reached (float64)."""
+    (tracked and of the state), the cap never reached by an elastic sphere (float64). A lossy
+    one's last hops, shorter and shorter down to ``RESTING_SPEED``, can hold more contacts
+    than the cap in a frame (``kernels/ballistic.py``): it stays at its last contact, a few
+    frames at most."""
     rng = np.random.default_rng(seed)
     boxes = tilted_plates()
     n = 32
@@ -366,7 +386,10 @@ def test_invariants(seed, retention, dt):
     slack = 1e-12 * (np.abs(e0) + GRAVITY * 5.0)
     assert np.all(out["energy"] <= e0 + slack)
     assert np.all(state <= e0 + slack)
-    assert out["capped"].sum() == 0
+    if retention == 1.0:
+        assert out["capped"].sum() == 0
+    else:
+        assert out["capped"].max() <= SETTLING_CAPPED_FRAMES
 
 
 def test_broad_phase_names():

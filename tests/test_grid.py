@@ -32,10 +32,19 @@ def random_scene(k: int, rng, offset: float = 0.0):
 
 
 def swarm_inputs(n, side, rng, offset, boxes, speed=(0.5, 20.0)):
+    """``n`` spheres drawn in the scene's cube with speeds in ``speed`` [m/s], less those that
+    start inside a box; a tenth of them aimed at a box's centre from within a frame's path
+    (``DT``), so that a scene of one small box has contacts too."""
     pos = rng.uniform(-side / 2, side / 2, (n, 3)) + offset
     r = rng.uniform(0.0, 0.05, n)
     d = rng.normal(size=(n, 3))
-    v = d / np.linalg.norm(d, axis=1)[:, None] * rng.uniform(*speed, (n, 1))
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    s = rng.uniform(*speed, (n, 1))
+    v = d * s
+    aimed = n // 10
+    k = rng.integers(0, len(boxes), aimed)
+    pos[:aimed] = boxes.center[k] + d[:aimed] * (s[:aimed] * DT * rng.uniform(0.5, 1.0, (aimed, 1)))
+    v[:aimed] = -v[:aimed]  # the path passes through the centre, so it meets the box
     clear = boxes.signed_distance(pos).min(axis=1) > r + 1e-3
     return pos[clear], v[clear], r[clear]
 
