@@ -20,7 +20,9 @@ Both run outside the source tree, so that they import the installed package (or 
 ``PYTHONPATH`` names: the same benchmark for another checkout). The table gives the median
 seconds of each stage (wall time), its share of the stages' sum and
 the whole command over its simulation time (issue 20's goal: within 4x). A shared machine
-stretches every stage alike, so the ratios are the figures to compare.
+stretches every stage alike, so the ratios are the figures to compare. The children inherit
+the environment: with ``PYTHONDONTWRITEBYTECODE`` set, an editable install's modules are
+compiled from source at every import (about 0.1 s of ``imports`` here); the results say which.
 """
 
 import json
@@ -122,8 +124,14 @@ def main(argv=None) -> None:
                 f"settings, median of {repeats} (wall time)",
                 rows, [("stage", "stage", "s"), ("seconds", "seconds", ".2f"),
                        ("share [%]", "share", ".0f"), ("x simulation", "per_simulation", ".2f")])
+    # with PYTHONDONTWRITEBYTECODE set (as on some shared machines) every import of an
+    # editable checkout compiles its modules from source: 0.1 s more of warpsim's own import
+    bytecode = "not written (PYTHONDONTWRITEBYTECODE)" if sys.flags.dont_write_bytecode \
+        else "written"
+    print(f"compiled bytecode of the package's modules: {bytecode}")
     finish(out, {"machine": info, "spheres": n, "frames": FRAMES, "every": EVERY,
-                 "repeats": repeats, "stages": samples, "command": whole, "rows": rows},
+                 "repeats": repeats, "bytecode": bytecode, "stages": samples,
+                 "command": whole, "rows": rows},
            started)
 
 
