@@ -36,7 +36,10 @@ def measured_order(scene, swarm, rates) -> tuple[float, list[float]]:
         times = np.arange(rate + 1) * dt
         ref = reference.simulate(scene, swarm, 1.0, times)
         bounced = np.unique(ref.events.bounces().sphere)
-        assert len(bounced) == len(ref.incomplete)  # every sphere bounces
+        # (nearly) every sphere bounces: one thrown up slowly from high in the room may meet
+        # nothing within the second (a seed of 128 spheres drew one); its error is that of
+        # free flight, which scales the mean, not the order
+        assert len(bounced) >= 0.95 * len(ref.incomplete)
         sim = ws.Simulator(scene, swarm, dt=dt, precision="float64")
         pos, _ = error_report.record_every_frame(sim, rate)
         errors.append(float(np.linalg.norm(pos - ref.position, axis=2).mean()))
