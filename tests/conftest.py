@@ -6,14 +6,19 @@ same examples on every run (``derandomize=True``, no example database), so what 
 catches does not vary between runs or machines; ``wide`` draws fresh random examples each run,
 ``helpers.WIDE_FACTOR`` times as many in the tests that size themselves with
 ``helpers.examples``, for a search on demand (``HYPOTHESIS_PROFILE=wide python -m pytest``).
+``WARPSIM_TEST_SALT=N`` does the same for the NumPy seeds (``helpers.TEST_SALT``).
 """
 
 import fcntl
 import os
 
+import numpy as np
 import pytest
-from helpers import DEVICES, HYPOTHESIS_PROFILE, TOLERANCES
+from helpers import DEVICES, HYPOTHESIS_PROFILE, TEST_SALT, TOLERANCES, salted_default_rng
 from hypothesis import settings
+
+if TEST_SALT is not None:
+    np.random.default_rng = salted_default_rng(np.random.default_rng, TEST_SALT)
 
 settings.register_profile("ci", derandomize=True, database=None, deadline=None,
                           print_blob=True)

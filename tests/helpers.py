@@ -19,6 +19,28 @@ HYPOTHESIS_PROFILE = os.environ.get("HYPOTHESIS_PROFILE", "ci")
 #: How many times more examples the ``wide`` profile draws than ``ci``.
 WIDE_FACTOR = 10
 
+#: ``WARPSIM_TEST_SALT=N`` (conftest): every NumPy generator seeded with an integer or a list of
+#: integers, the tests' and the package's alike, is seeded with ``N`` mixed in, so the suite's
+#: random scenes, swarms and draws are drawn again (a search beyond the fixed seeds, as the
+#: ``wide`` profile is for hypothesis's tests). None (unset): the seeds as written.
+TEST_SALT = None if os.environ.get("WARPSIM_TEST_SALT") is None else int(
+    os.environ["WARPSIM_TEST_SALT"])
+
+
+def salted_default_rng(default_rng, salt: int):
+    """``default_rng`` with ``salt`` put in front of an integer seed or a list of them (any
+    other seed, None included, passes through unchanged)."""
+
+    def salted(seed=None, *args, **kwargs):
+        if isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            seed = [salt, int(seed)]
+        elif isinstance(seed, (list, tuple)) and seed and all(
+                isinstance(k, (int, np.integer)) for k in seed):
+            seed = [salt, *map(int, seed)]
+        return default_rng(seed, *args, **kwargs)
+
+    return salted
+
 
 def examples(count: int) -> int:
     """``count`` hypothesis examples under the ``ci`` profile, ``WIDE_FACTOR`` times more under
