@@ -22,9 +22,8 @@ WIDE_FACTOR = 10
 #: ``WARPSIM_TEST_SALT=N`` (conftest): every NumPy generator seeded with an integer or a list of
 #: integers, the tests' and the package's alike, is seeded with ``N`` mixed in, so the suite's
 #: random scenes, swarms and draws are drawn again (a search beyond the fixed seeds, as the
-#: ``wide`` profile is for hypothesis's tests). None (unset): the seeds as written.
-TEST_SALT = None if os.environ.get("WARPSIM_TEST_SALT") is None else int(
-    os.environ["WARPSIM_TEST_SALT"])
+#: ``wide`` profile is for hypothesis's tests). None (unset or empty): the seeds as written.
+TEST_SALT = int(os.environ["WARPSIM_TEST_SALT"]) if os.environ.get("WARPSIM_TEST_SALT") else None
 
 
 def salted_default_rng(default_rng, salt: int):
