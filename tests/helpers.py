@@ -26,6 +26,10 @@ WIDE_FACTOR = 10
 TEST_SALT = int(os.environ["WARPSIM_TEST_SALT"]) if os.environ.get("WARPSIM_TEST_SALT") else None
 
 
+#: NumPy's own ``default_rng``, whatever conftest puts in its place under a salt.
+NUMPY_DEFAULT_RNG = np.random.default_rng
+
+
 def salted_default_rng(default_rng, salt: int):
     """``default_rng`` with ``salt`` put in front of an integer seed or a list of them (any
     other seed, None included, passes through unchanged)."""

@@ -235,12 +235,9 @@ def cylinder_slide(axis_point, axis, R: float, x0, v0, g, t0: float = 0.0,
 
     out = Trajectory()
     lam0 = G * np.cos(q0) - R * w * w
-    if lam0 < 0.0:
-        out.extend(free_flight(x0, v0, g, t0))
-        return out
     cos_d = (2.0 * np.cos(q0) + R * w * w / G) / 3.0
     q_end = np.arccos(min(1.0, cos_d))
-    if q_end <= q0:  # lam0 is 0 but for rounding: the normal force vanishes at the start
+    if lam0 < 0.0 or q_end <= q0:  # the second: lam0 is 0 but for rounding
         out.extend(free_flight(x0, v0, g, t0))
         return out
     end_kind = "flight"
@@ -347,7 +344,8 @@ def sphere_slide(center, R: float, x0, v0, g, t0: float = 0.0) -> Trajectory:
     v2 = float(v0 @ v0)
     du0 = float(v0 @ up) / R  # <= 0
     out = Trajectory()
-    if G * u0 - v2 / R < 0.0:
+    u_d = (2.0 * u0 + v2 / (G * R)) / 3.0
+    if G * u0 - v2 / R < 0.0 or u_d >= u0:  # the second: lambda is 0 but for rounding
         out.extend(free_flight(x0, v0, g, t0))
         return out
     a0 = 1.0 - u0 * u0
@@ -372,10 +370,6 @@ def sphere_slide(center, R: float, x0, v0, g, t0: float = 0.0) -> Trajectory:
         return integrate(lambda w: L / (R * R * (a0 + w * w * (2.0 * u0 - w * w))) * dt_ds(w),
                          0.0, s)
 
-    u_d = (2.0 * u0 + v2 / (G * R)) / 3.0
-    if u_d >= u0:  # lambda is 0 but for rounding: the normal force vanishes at the start
-        out.extend(free_flight(x0, v0, g, t0))
-        return out
     s_end = np.sqrt(u0 - u_d)
     t_end = time_of(s_end)
 

@@ -8,7 +8,14 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from helpers import HYPOTHESIS_PROFILE, TEST_SALT, WIDE_FACTOR, examples, salted_default_rng
+from helpers import (
+    HYPOTHESIS_PROFILE,
+    NUMPY_DEFAULT_RNG,
+    TEST_SALT,
+    WIDE_FACTOR,
+    examples,
+    salted_default_rng,
+)
 from hypothesis import settings
 
 
@@ -30,7 +37,7 @@ def test_wide_profile_draws_fresh_and_more_examples():
 
 
 def test_salted_seeds_draw_what_the_salt_and_the_seed_draw_together():
-    original = np.random._generator.default_rng
+    original = NUMPY_DEFAULT_RNG
     salted = salted_default_rng(original, 101)
     assert salted(7).random() == original([101, 7]).random() != original(7).random()
     assert salted([3, 4]).random() == original([101, 3, 4]).random()
@@ -42,10 +49,10 @@ def test_salted_seeds_draw_what_the_salt_and_the_seed_draw_together():
 
 def test_the_seeds_are_the_written_ones_unless_a_salt_is_set():
     if TEST_SALT is None:
-        assert np.random.default_rng is np.random._generator.default_rng
+        assert np.random.default_rng is NUMPY_DEFAULT_RNG
     else:
         assert np.random.default_rng(7).random() == \
-            np.random._generator.default_rng([TEST_SALT, 7]).random()
+            NUMPY_DEFAULT_RNG([TEST_SALT, 7]).random()
 
 
 def test_the_salt_reaches_the_tests_processes(tmp_path):
@@ -67,5 +74,5 @@ def test_the_salt_reaches_the_tests_processes(tmp_path):
                              cwd=tmp_path)
         assert out.returncode == 0, out.stdout + out.stderr
         draws[salt] = float(out.stdout.split("DRAW ")[1].split()[0])
-    assert draws[None] == np.random._generator.default_rng(7).random()
-    assert draws["101"] == np.random._generator.default_rng([101, 7]).random()
+    assert draws[None] == NUMPY_DEFAULT_RNG(7).random()
+    assert draws["101"] == NUMPY_DEFAULT_RNG([101, 7]).random()
