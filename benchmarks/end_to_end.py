@@ -1,7 +1,7 @@
 """End to end: what a ``warpsim run`` spends in each stage, against its simulation.
 
 Run from the repository root:
-``python -m benchmarks.end_to_end [--quick] [--repeats R] [--n N] [--out PATH]``.
+``python -m benchmarks.end_to_end [--quick] [--repeats R] [--n N] [--against REV] [--out PATH]``.
 
 The command of issue 20, ``warpsim run room -n 200000 --frames 120 --every 10`` (quick: 20 000
 spheres), is timed two ways, the two taking turns ``R`` times in fresh processes:
@@ -14,7 +14,15 @@ spheres), is timed two ways, the two taking turns ``R`` times in fresh processes
    ``set-up`` (``Simulator``: checks, broad phase, upload), ``build`` (the kernel, from Warp's
    cache), ``simulation`` (``Simulator.run``, the recorded frames copied out) and ``output``
    (``export.write_usd``); the garbage collector's objects are frozen after the imports, as
-   the command freezes them before it runs (``warpsim.apps.cli.console``).
+   the command freezes them before it runs (``warpsim.apps.cli.console``). The stages' sum is
+   not the command's time: the command loads ``pxr`` in a process of its own while it draws
+   and simulates (``warpsim.export.usd_process``), where this process loads it among the
+   imports.
+
+Each whole command also prints its own simulation time; the median over the runs of the
+command's wall time over that is printed too (the same ratio, without the stages' process).
+``--against REV``: the whole command of git revision ``REV``'s package (laid out as
+``hot_loop --against`` lays it out) takes turns with this checkout's, a row of its own.
 
 Both run outside the source tree, so that they import the installed package (or the one
 ``PYTHONPATH`` names: the same benchmark for another checkout). The table gives the median
@@ -26,6 +34,8 @@ compiled from source at every import (about 0.1 s of ``imports`` here); the resu
 """
 
 import json
+import os
+import re
 import statistics
 import subprocess
 import sys
@@ -85,18 +95,29 @@ def stage_times(n: int, out: Path) -> dict:
     return json.loads(result.stdout.strip().splitlines()[-1])
 
 
-def command_time(n: int, out: Path) -> float:
+def command_time(n: int, out: Path, site: Path | None = None) -> tuple[float, float]:
+    """The whole command's wall time and the simulation time it printed [s]; ``site``:
+    another revision's package (``hot_loop.export_tree``), else this checkout's installed
+    one."""
+    env = dict(os.environ)
+    if site is not None:
+        env["PYTHONPATH"] = str(site)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "warpsim", "run", SCENE, "-n", str(n), "--frames",
-                    str(FRAMES), "--every", str(EVERY), "-o", str(out), "--no-progress"],
-                   check=True, capture_output=True, text=True, cwd=tempfile.gettempdir())
-    return time.perf_counter() - t0
+    done = subprocess.run([sys.executable, "-m", "warpsim", "run", SCENE, "-n", str(n),
+                           "--frames", str(FRAMES), "--every", str(EVERY), "-o", str(out),
+                           "--no-progress"], check=True, capture_output=True, text=True,
+                          cwd=tempfile.gettempdir(), env=env)
+    wall = time.perf_counter() - t0
+    simulated = re.search(r"^simulated .* in ([0-9.]+) s", done.stdout, flags=re.M)
+    return wall, float(simulated.group(1))
 
 
 def main(argv=None) -> None:
     p = parser("end_to_end", __doc__)
     p.add_argument("--repeats", type=int, default=None, help="turns (default 3)")
     p.add_argument("--n", type=int, default=None, help="spheres (default 200 000)")
+    p.add_argument("--against", default=None,
+                   help="git revision whose whole command takes turns with this one's")
     args = p.parse_args(argv)
     started = time.perf_counter()
     _, info, out = start("end_to_end", args)
@@ -104,13 +125,30 @@ def main(argv=None) -> None:
     repeats = args.repeats or (1 if args.quick else 3)
     samples = {stage: [] for stage in STAGES}
     whole = []
+    base = []
+    rev = None
     with tempfile.TemporaryDirectory() as tmp:
         usd = Path(tmp) / "room.usdc"
+        site = None
+        if args.against is not None:
+            from .hot_loop import export_tree
+
+            rev = subprocess.run(["git", "rev-parse", "--short", args.against], check=True,
+                                 capture_output=True, text=True).stdout.strip()
+            site = export_tree(rev, Path(tmp))
+            command_time(n, usd, site)
         command_time(n, usd)  # warm-up: the kernel cache, the file system
-        for _ in range(repeats):
+        for turn in range(repeats):
             for stage, seconds in stage_times(n, usd).items():
                 samples[stage].append(seconds)
-            whole.append(command_time(n, usd))
+            sides = [None] if site is None else [None, site] if turn % 2 == 0 else [site, None]
+            for side in sides:
+                (whole if side is None else base).append(command_time(n, usd, side))
+    own = statistics.median(wall / sim for wall, sim in whole)
+    own_base = statistics.median(wall / sim for wall, sim in base) if base else None
+    whole_runs, base_runs = whole, base
+    whole = [wall for wall, _ in whole_runs]
+    base = [wall for wall, _ in base_runs]
     median = {stage: statistics.median(values) for stage, values in samples.items()}
     total = sum(median.values())
     command = statistics.median(whole)
@@ -120,6 +158,10 @@ def main(argv=None) -> None:
                  "per_simulation": total / median["simulation"]})
     rows.append({"stage": "whole command", "seconds": command, "share": None,
                  "per_simulation": command / median["simulation"]})
+    if base:
+        rows.append({"stage": f"whole command, {rev}", "seconds": statistics.median(base),
+                     "share": None,
+                     "per_simulation": statistics.median(base) / median["simulation"]})
     print_table(f"warpsim run {SCENE} -n {n} --frames {FRAMES} --every {EVERY}, default "
                 f"settings, median of {repeats} (wall time)",
                 rows, [("stage", "stage", "s"), ("seconds", "seconds", ".2f"),
@@ -129,9 +171,13 @@ def main(argv=None) -> None:
     bytecode = "not written (PYTHONDONTWRITEBYTECODE)" if sys.flags.dont_write_bytecode \
         else "written"
     print(f"compiled bytecode of the package's modules: {bytecode}")
+    print(f"whole command over the simulation it printed, median of the runs' ratios: {own:.2f}x"
+          + (f"; {rev}: {own_base:.2f}x" if base else ""))
     finish(out, {"machine": info, "spheres": n, "frames": FRAMES, "every": EVERY,
                  "repeats": repeats, "bytecode": bytecode, "stages": samples,
-                 "command": whole, "rows": rows},
+                 "command": whole, "against": rev, "command_against": base,
+                 "command_runs": whole_runs, "command_against_runs": base_runs,
+                 "own_ratio": own, "own_ratio_against": own_base, "rows": rows},
            started)
 
 

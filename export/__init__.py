@@ -15,7 +15,7 @@ _HOMES = {
     "check_writable": "files",
     "draw_frame": "preview",
     "estimate_rerun_bytes": "rerun",  # rerun-sdk (the viewer extra) is imported when writing
-    "estimate_usd_bytes": "usd_write",
+    "estimate_usd_bytes": "usd_size",
     "half_orientations": "usd_write",
     "obstacles_from_usd": "stage_in",
     "read_usd": "usd_read",

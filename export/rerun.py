@@ -48,7 +48,8 @@ from .. import validation as check
 from ..trajectory import Trajectory
 from .files import atomic_output, check_writable
 from .mesh import box_mesh, rounded_box_mesh
-from .usd_write import OBSTACLE_COLOR, _selected, _shapes  # the USD writer's colour and rules
+from .usd_size import shapes as _shapes  # the USD writer's rules and colour
+from .usd_write import OBSTACLE_COLOR, _selected
 from .usd_write import SPHERES as USD_SPHERES
 from .usd_write import WORLD as USD_WORLD
 

@@ -656,6 +656,61 @@ def test_bad_frames_refused(device):
     assert sim.frame == 0
 
 
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+@pytest.mark.parametrize("scene_name, velocities, spheres", [
+    ("room", False, None), ("nozzle", True, None), ("spin", True, [5, 0, 17])])
+def test_recorded_arrays_made_by_allocate_hold_the_same_frames(precision, scene_name,
+                                                              velocities, spheres):
+    """``Simulator.run(allocate=...)``: views of one buffer, strided ones included, hold the
+    same bits as the default arrays (births' NaN rows, velocities, a subset of spheres)."""
+    scene = ws.Scene.load(scene_name)
+    swarm = scene.spawn(n=40, seed=2)
+    asked = []
+    pool = np.full(1 << 20, 7.0)  # float64 storage, so a float32 array can be a strided view
+
+    def allocate(shape, dtype):
+        asked.append((tuple(shape), np.dtype(dtype)))
+        size = int(np.prod(shape))
+        start = sum(int(np.prod(a)) for a, _ in asked[:-1]) * 2
+        if dtype == np.float64:
+            return pool[start:start + size].reshape(shape)
+        return pool[start:start + size].view(np.float32)[::2].reshape(shape)  # strided
+
+    runs = []
+    for allocate_with in (None, allocate):
+        sim = ws.Simulator(scene, swarm, precision=precision)
+        runs.append(sim.run(25, every=4, velocities=velocities, spheres=spheres,
+                            allocate=allocate_with))
+    plain, made = runs
+    names = ["position", "orientation"] + (["velocity", "angular_velocity"] if velocities
+                                           else [])
+    assert [shape for shape, _ in asked] == [getattr(plain, name).shape for name in names]
+    assert all(dtype == np.dtype(precision) for _, dtype in asked)
+    for name in names:
+        assert np.shares_memory(getattr(made, name), pool)
+        np.testing.assert_array_equal(getattr(made, name), getattr(plain, name))
+    if scene_name == "nozzle":
+        assert np.isnan(made.position).any()
+
+
+@pytest.mark.parametrize("allocate, message", [
+    ("np.empty", r"allocate must be a function \(shape, dtype\) -> array or None, got str"),
+    (lambda shape, dtype: np.empty(shape[:-1], dtype),
+     r"allocate returned a float32 array of shape \(4, 5\) for position, expected a writable "
+     r"float32 array of shape \(4, 5, 3\)"),
+    (lambda shape, dtype: np.empty(shape, np.float64),
+     r"returned a float64 array of shape \(4, 5, 3\) for position"),
+    (lambda shape, dtype: np.empty(shape, dtype).tolist(), r"returned list for position"),
+    (lambda shape, dtype: np.broadcast_to(np.empty(1, dtype), shape),
+     r"returned a read-only float32 array of shape \(4, 5, 3\) for position"),
+])
+def test_bad_allocate_refused_before_any_frame(allocate, message):
+    sim = ws.Simulator(ws.Scene(floor()), ws.Swarm(**GOOD_SWARM))
+    with pytest.raises(ValueError, match=message):
+        sim.run(3, allocate=allocate)
+    assert sim.frame == 0
+
+
 def test_inputs_never_mutated_and_swarm_holds_copies(device):
     rng = np.random.default_rng(4)
     n = 8

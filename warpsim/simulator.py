@@ -449,7 +449,8 @@ class Simulator:
 
     def run(self, frames: int, every: int = 1, progress: bool = False,
             velocities: bool = False, events: bool = False,
-            event_capacity: int = DEFAULT_EVENT_CAPACITY, spheres=None) -> Trajectory:
+            event_capacity: int = DEFAULT_EVENT_CAPACITY, spheres=None,
+            allocate=None) -> Trajectory:
         """Advance ``frames`` frames, recording the current state and every ``every``-th frame.
 
         The kernel writes the recorded frames itself; one launch covers many of them.
@@ -473,9 +474,19 @@ class Simulator:
                 None for all: the trajectory then holds only those (its ``sphere_ids``), so
                 a run that writes a few spheres of a large swarm keeps a few in memory. Every
                 sphere is still simulated; events and stats cover them all.
+            allocate: makes each recorded array (``position``, ``orientation``, and with
+                ``velocities`` ``velocity`` and ``angular_velocity``): ``allocate(shape,
+                dtype)`` returns a writable array of that shape and type, which the run fills
+                and the trajectory holds (None: ``numpy.empty``). For arrays in memory another
+                process reads without a copy, as the command's USD writer does
+                (:mod:`warpsim.export.usd_process`).
 
         Returns:
             :class:`Trajectory` with the frame numbers since the start of the simulation.
+
+        Raises:
+            ValueError: a bad argument, or ``allocate`` returning anything but a writable
+                array of the shape and type asked for (the message names the array).
         """
         frames = check.positive_int("frames", frames)
         every = check.positive_int("every", every)
@@ -493,10 +504,11 @@ class Simulator:
         n, count = (self._n if keep is None else keep.size), len(stops) + 1
         pick = (lambda a: a) if keep is None else (lambda a: a[..., keep, :])
         first = self.frame
-        position = np.empty((count, n, 3), dtype=self._p.np_dtype)
-        orientation = np.empty((count, n, 4), dtype=self._p.np_dtype)
-        velocity = np.empty((count, n, 3), dtype=self._p.np_dtype) if velocities else None
-        angular = np.empty((count, n, 3), dtype=self._p.np_dtype) if velocities else None
+        empty = _allocator(allocate, self._p.np_dtype)
+        position = empty("position", (count, n, 3))
+        orientation = empty("orientation", (count, n, 4))
+        velocity = empty("velocity", (count, n, 3)) if velocities else None
+        angular = empty("angular_velocity", (count, n, 3)) if velocities else None
         position[0] = pick(self.state_0.position.numpy())
         orientation[0] = pick(self.state_0.orientation.numpy())
         if velocities:
@@ -837,6 +849,29 @@ def _shards(n: int, workers: int) -> list[slice]:
     """``workers`` contiguous, nearly equal slices of ``range(n)``."""
     bounds = np.linspace(0, n, workers + 1).round().astype(int)
     return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True) if b > a]
+
+
+def _allocator(allocate, dtype):
+    """``empty(name, shape)``: the recorded array ``name`` from ``allocate(shape, dtype)``
+    (``numpy.empty`` when None), checked to be a writable array of that shape and type."""
+    if allocate is None:
+        return lambda _name, shape: np.empty(shape, dtype=dtype)
+    if not callable(allocate):
+        raise ValueError(f"allocate must be a function (shape, dtype) -> array or None, got "
+                         f"{type(allocate).__name__}")
+
+    def empty(name, shape):
+        out = allocate(shape, np.dtype(dtype))
+        if (not isinstance(out, np.ndarray) or out.shape != tuple(shape)
+                or out.dtype != dtype or not out.flags.writeable):
+            got = (f"a {'read-only ' if not out.flags.writeable else ''}{out.dtype} array of "
+                   f"shape {out.shape}" if isinstance(out, np.ndarray)
+                   else type(out).__name__)
+            raise ValueError(f"allocate returned {got} for {name}, expected a writable "
+                             f"{np.dtype(dtype)} array of shape {tuple(shape)}")
+        return out
+
+    return empty
 
 
 def _progress_bar(frames: int, enabled: bool):

@@ -338,6 +338,7 @@ def _cmd_run(args) -> int:
 
     from .. import validation as check
     from ..export.files import check_writable, default_name
+    from ..export.usd_process import SHARED_ALIGN, UsdWriter
 
     scene = ws.Scene.load(args.scene)
     stage_set = getattr(scene.boxes, "stage", None)  # obstacles read from a USD stage
@@ -401,77 +402,90 @@ def _cmd_run(args) -> int:
         check_recording_size(args, scene, n_written, n_records)
     check_memory(args, n, n_written, n_records, every, end - start, estimate)
     check_device(args.device, args.debug_mode)
-    # the block draw of a sharded run, so that the same command with --shards or --dask
-    # simulates the same spheres, bit for bit
-    from ..distributed.draw import DEFAULT_BLOCK, may_start_free, sharded_spawn
 
-    swarm = sharded_spawn(scene, n, args.seed, DEFAULT_BLOCK if args.block is None
-                          else check.positive_int("block", args.block), dt=args.dt)
-    extra = _simulator_options(args)
-    sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
-                       device=args.device, precision=args.precision,
-                       broad_phase=args.broad_phase, free_flight=may_start_free(scene),
-                       **extra)
-    if subset is not None:
-        options["spheres"] = subset
-    print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "
-          f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
-          f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
-    # reported apart from the run's speed; with --events every recorded frame is run by the
-    # kernel with the contact code, and the plain one only steps to --start
-    build = _build_with_notice(sim, bool(args.events), plain=not args.events or start > 0)
-    if start:
-        sim.step(start)
-    if args.rerun is not None:  # also samples the energy and the counters at each record
-        from ..export.rerun import run_with_scalars
+    def write_file(trajectory):
+        return export.write_usd(out, scene, trajectory, velocities=args.velocities, warn=False)
 
-        traj, scalars = run_with_scalars(sim, end - start, every=every,
-                                         progress=not args.no_progress,
-                                         start=swarm.position, **options)
-    else:
-        traj = sim.run(end - start, every=every, progress=not args.no_progress, **options)
-    state = sim.state()
-    stats = sim.stats
-    print(f"simulated {stats.frames} frames x {len(swarm)} spheres in {stats.seconds:.2f} s "
-          f"(kernel build {build:.2f} s): "
-          f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
-    print(bounce_line(stats))
-    print(energy_line(sim, swarm, state))
-    print(f"broad phase: {describe_broad_phase(stats.broad_phase, stats.requested_broad_phase)}")
+    # the file's writer, forked now where it may be: it loads pxr while this process draws and
+    # simulates, and reads the recorded frames from the memory they are recorded in
+    # (export/usd_process.py); with --debug the file is written here, tracebacks whole
+    recorded_bytes = (n_records * n_written * (8 if args.precision == "float64" else 4)
+                      * (3 + 4 + (6 if args.velocities else 0)))  # Simulator.run's arrays
+    with UsdWriter(write_file, fork=False if args.debug_mode else None,
+                   share_bytes=recorded_bytes + 4 * SHARED_ALIGN) as usd_writer:
+        # the block draw of a sharded run, so that the same command with --shards or --dask
+        # simulates the same spheres, bit for bit
+        from ..distributed.draw import DEFAULT_BLOCK, may_start_free, sharded_spawn
 
-    def write_scene():
-        path = export.write_usd(out, scene, traj, velocities=args.velocities, warn=False)
-        print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {len(traj)} frames "
-              f"{int(traj.frame[0])}..{int(traj.frame[-1])}, {n_written} spheres)")
+        swarm = sharded_spawn(scene, n, args.seed, DEFAULT_BLOCK if args.block is None
+                              else check.positive_int("block", args.block), dt=args.dt)
+        extra = _simulator_options(args)
+        sim = ws.Simulator(scene, swarm, dt=args.dt, max_bounces=args.max_bounces,
+                           device=args.device, precision=args.precision,
+                           broad_phase=args.broad_phase, free_flight=may_start_free(scene),
+                           **extra)
+        if subset is not None:
+            options["spheres"] = subset
+        print(f"{scene.name}: {len(swarm)} spheres, {len(scene.boxes)} obstacles, {end} frames "
+              f"of {sim.dt:g} s on {sim.device} ({args.precision}); about "
+              f"{estimate / 1e6:.1f} MB of USD", file=sys.stderr)
+        # reported apart from the run's speed; with --events every recorded frame is run by the
+        # kernel with the contact code, and the plain one only steps to --start
+        build = _build_with_notice(sim, bool(args.events), plain=not args.events or start > 0)
+        if start:
+            sim.step(start)
+        if args.rerun is not None:  # also samples the energy and the counters at each record
+            from ..export.rerun import run_with_scalars
 
-    def write_events():
-        events = traj.events
-        events_path = events.write_parquet(args.events)
-        lost = (f"; {events.dropped:,} dropped: the buffer was full, raise --events-capacity"
-                if events.dropped else "")
-        print(f"wrote {events_path} ({len(events):,} contacts{lost})")
+            traj, scalars = run_with_scalars(sim, end - start, every=every,
+                                             progress=not args.no_progress,
+                                             start=swarm.position, **options)
+        else:
+            traj = sim.run(end - start, every=every, progress=not args.no_progress,
+                           allocate=usd_writer.empty, **options)
+        state = sim.state()
+        stats = sim.stats
+        print(f"simulated {stats.frames} frames x {len(swarm)} spheres in {stats.seconds:.2f} s "
+              f"(kernel build {build:.2f} s): "
+              f"{stats.sphere_frames_per_second:,.0f} sphere-frames/s")
+        print(bounce_line(stats))
+        print(energy_line(sim, swarm, state))
+        print("broad phase: "
+              f"{describe_broad_phase(stats.broad_phase, stats.requested_broad_phase)}")
 
-    def write_recording():
-        rrd = export.write_rerun(args.rerun, scene, traj, ids=traj.ids(),
-                                 sample=args.rerun_sample, scalars=scalars)
-        print(f"wrote {rrd} ({rrd.stat().st_size / 1e6:.1f} MB Rerun recording; "
-              f"'warpsim view {rrd}' opens it)")
+        def write_scene():
+            path = usd_writer.write(traj)
+            print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {len(traj)} frames "
+                  f"{int(traj.frame[0])}..{int(traj.frame[-1])}, {n_written} spheres)")
 
-    def compare():
-        from ..analysis import error_report
+        def write_events():
+            events = traj.events
+            events_path = events.write_parquet(args.events)
+            lost = (f"; {events.dropped:,} dropped: the buffer was full, raise --events-capacity"
+                    if events.dropped else "")
+            print(f"wrote {events_path} ({len(events):,} contacts{lost})")
 
-        report = error_report.compare(sim, scene, swarm, sample=args.error_sample)
-        print(report.summary())
+        def write_recording():
+            rrd = export.write_rerun(args.rerun, scene, traj, ids=traj.ids(),
+                                     sample=args.rerun_sample, scalars=scalars)
+            print(f"wrote {rrd} ({rrd.stat().st_size / 1e6:.1f} MB Rerun recording; "
+                  f"'warpsim view {rrd}' opens it)")
 
-    # each output on its own: one that fails never loses the others (nor the run's figures)
-    outputs = [("USD file", write_scene)]
-    if args.events is not None:
-        outputs.append(("events file", write_events))
-    if args.rerun is not None:
-        outputs.append(("Rerun recording", write_recording))
-    if args.error_sample is not None:
-        outputs.append(("error sample", compare))
-    return finish_outputs(outputs, args.debug_mode)
+        def compare():
+            from ..analysis import error_report
+
+            report = error_report.compare(sim, scene, swarm, sample=args.error_sample)
+            print(report.summary())
+
+        # each output on its own: one that fails never loses the others (nor the run's figures)
+        outputs = [("USD file", write_scene)]
+        if args.events is not None:
+            outputs.append(("events file", write_events))
+        if args.rerun is not None:
+            outputs.append(("Rerun recording", write_recording))
+        if args.error_sample is not None:
+            outputs.append(("error sample", compare))
+        return finish_outputs(outputs, args.debug_mode)
 
 
 def finish_outputs(outputs, debug: bool) -> int:
