@@ -266,7 +266,7 @@ def test_the_command_writes_its_file_in_a_child_and_never_loads_pxr(tmp_path):
             return real_write(self, trajectory)
         usd_process.UsdWriter.write = spy_write
         args = ["run", "nozzle", "-n", "400", "--frames", "60", "--every", "5",
-                "--no-progress", "--velocities"]
+                "--no-progress", "--velocities", "--spheres", "3:300"]
         first = cli.main(args + ["-o", "{tmp_path}/a.usdc"])
         pxr_after = "pxr" in sys.modules
         usd_process.can_fork = lambda: False
