@@ -33,8 +33,8 @@ from PIL import Image, ImageDraw
 from ..obstacles import RoundedBoxes, quat_to_matrix
 from .files import atomic_output
 from .mesh import rounded_box_mesh
+from .usd_layout import OBSTACLE_COLOR, SPHERE_DARK, SPHERE_LIGHT
 from .usd_read import read_usd_boxes, read_usd_frame
-from .usd_write import OBSTACLE_COLOR, SPHERE_DARK, SPHERE_LIGHT
 
 SUPERSAMPLING = 2  # rendered at this many times the size per axis, then averaged down
 #: Largest picture drawn [pixels]: rendered at SUPERSAMPLING^2 times that with colour and depth

@@ -48,10 +48,11 @@ from .. import validation as check
 from ..trajectory import Trajectory
 from .files import atomic_output, check_writable
 from .mesh import box_mesh, rounded_box_mesh
-from .usd_size import shapes as _shapes  # the USD writer's rules and colour
-from .usd_write import OBSTACLE_COLOR, _selected
-from .usd_write import SPHERES as USD_SPHERES
-from .usd_write import WORLD as USD_WORLD
+from .usd_layout import OBSTACLE_COLOR  # the USD writer's rules and colour, without pxr
+from .usd_layout import SPHERES as USD_SPHERES
+from .usd_layout import WORLD as USD_WORLD
+from .usd_layout import selected_rows as _selected
+from .usd_layout import shapes as _shapes
 
 SUFFIX = ".rrd"
 APPLICATION_ID = "warpsim"

@@ -3,13 +3,14 @@
 :func:`estimate_usd_bytes` is what the command checks against ``--max-bytes`` before any sphere
 is drawn; with pxr out of this module, that check does not load pxr (about 0.35 s), which the
 command then loads in a process of its own while it simulates
-(:mod:`warpsim.export.usd_process`). :func:`shapes` is the writer's rule for which boxes share
-a mesh, used by the estimate, the USD writer and the Rerun writer.
+(:mod:`warpsim.export.usd_process`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from .usd_layout import shapes
 
 FORMATS = ("usda", "usdc")
 SUFFIXES = (".usdc", ".usda")
@@ -26,18 +27,6 @@ _SIZE_MODEL = {
              "orientation": (24, 91), "velocity": 36, "angular_velocity": (11, 35),
              "per_box": 400, "per_shape": 1_700, "per_rounded_shape": 28_300, "unborn": 5},
 }
-
-
-def shapes(boxes) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct shapes of the boxes, in order of first use: ``(shape of each box (K,) int64,
-    shapes (S, 4) = half extents and radius)``. Equal means equal to the bit."""
-    key = np.ascontiguousarray(np.column_stack([boxes.half_extents, boxes.radius]))
-    _, first, inverse = np.unique(key.view(np.dtype((np.void, key.dtype.itemsize * 4))),
-                                  return_index=True, return_inverse=True)
-    order = np.argsort(first)  # shapes numbered by their first box
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    return rank[inverse.reshape(-1)], key[first[order]]
 
 
 def estimate_usd_bytes(n_spheres: int, n_frames: int, fmt: str, *, boxes=None,
@@ -99,4 +88,4 @@ def estimate_usd_bytes(n_spheres: int, n_frames: int, fmt: str, *, boxes=None,
     return int(total)
 
 
-__all__ = ["FORMATS", "SUFFIXES", "estimate_usd_bytes", "shapes"]
+__all__ = ["FORMATS", "SUFFIXES", "estimate_usd_bytes"]

@@ -77,33 +77,32 @@ from pathlib import Path
 import numpy as np
 from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, Vt
 
-from .. import validation as check
 from ..obstacles import RoundedBoxes
 from ..trajectory import Trajectory
 from .files import atomic_output
 from .mesh import box_mesh, checker_sphere_mesh, rounded_box_mesh
 from .origins import ORIGIN_OP, frame_origins
+from .usd_layout import (  # noqa: F401 - the layout's names are the writer's too
+    LOOKS,
+    OBSTACLE_COLOR,
+    OBSTACLE_MATERIAL,
+    OBSTACLES,
+    PROTOTYPE,
+    SHAPES,
+    SPHERE_DARK,
+    SPHERE_LIGHT,
+    SPHERES,
+    WORLD,
+)
+from .usd_layout import selected_rows as _selected
+from .usd_layout import shapes as _shapes
 from .usd_size import FORMATS, SUFFIXES, estimate_usd_bytes  # noqa: F401 - its names too
-from .usd_size import shapes as _shapes
-
-WORLD = "/World"
-LOOKS = "/World/Looks"
-SHAPES = "/World/ObstacleShapes"
-OBSTACLES = "/World/Obstacles"
-SPHERES = "/World/Spheres"
-PROTOTYPE = "/World/Spheres/Prototypes/CheckerBall"
-OBSTACLE_MATERIAL = f"{LOOKS}/Obstacle"
 
 ROUNDED_BOX_SEGMENTS = 8  # edges per quarter circle of a rounded box's edges and corners
 SPHERE_LONGITUDES = 32  # prototype tessellation: smooth enough at any zoom a swarm is seen at
 SPHERE_LATITUDES = 16
 HALF_CHUNK = 1 << 16  # quaternions rounded to half together: bounds the temporary memory
 DEGREES_PER_RADIAN = 180.0 / np.pi
-
-# Colours (linear RGB) shared with the preview so that both look alike.
-SPHERE_LIGHT = (0.95, 0.62, 0.18)
-SPHERE_DARK = (0.45, 0.12, 0.05)
-OBSTACLE_COLOR = (0.42, 0.52, 0.66)
 
 class LargeOutputWarning(UserWarning):
     """The USD file about to be written is estimated larger than the caller's ``max_bytes``.
@@ -134,42 +133,6 @@ def pxr_message(exc: Exception) -> str:
 
 # --------------------------------------------------------------------------------------------
 # Writing
-
-
-def _selected(trajectory: Trajectory, stride: int, spheres) -> tuple[np.ndarray, np.ndarray]:
-    """Validated (frame rows, sphere indices) to write; the last row is always kept."""
-    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)) or stride < 1:
-        raise ValueError(f"stride must be an integer >= 1, got {stride!r}")
-    frame = np.asarray(trajectory.frame)
-    n_frames, n = len(frame), trajectory.position.shape[1]
-    if n_frames == 0:
-        raise ValueError("trajectory has no recorded frames")
-    if trajectory.position.shape != (n_frames, n, 3):
-        raise ValueError(f"trajectory.position must have shape ({n_frames}, N, 3), "
-                         f"got {trajectory.position.shape}")
-    if trajectory.orientation.shape != (n_frames, n, 4):
-        raise ValueError(f"trajectory.orientation must have shape ({n_frames}, {n}, 4), "
-                         f"got {trajectory.orientation.shape}")
-    for name in ("velocity", "angular_velocity"):
-        values = getattr(trajectory, name, None)
-        if values is not None and np.shape(values) != (n_frames, n, 3):
-            raise ValueError(f"trajectory.{name} must have shape ({n_frames}, {n}, 3), "
-                             f"got {np.shape(values)}")
-    if np.shape(trajectory.radius) != (n,):
-        raise ValueError(f"trajectory.radius must have shape ({n},), "
-                         f"got {np.shape(trajectory.radius)}")
-    if not (np.isfinite(trajectory.dt) and trajectory.dt > 0):
-        raise ValueError(f"trajectory.dt must be > 0, got {trajectory.dt!r}")
-    if (np.diff(frame) <= 0).any():
-        raise ValueError("trajectory.frame must be strictly increasing")
-    rows = np.unique(np.r_[np.arange(0, n_frames, stride), n_frames - 1])
-    if spheres is None:
-        return rows, np.arange(n)
-    raw = np.asarray(spheres)
-    if raw.ndim != 1 or (raw.size and (raw.dtype == bool
-                                       or not np.issubdtype(raw.dtype, np.integer))):
-        raise ValueError(f"spheres must be a 1-D sequence of sphere indices, got {spheres!r}")
-    return rows, check.index_list("spheres", raw, n)
 
 
 def born_stand_ins(trajectory: Trajectory) -> Trajectory:

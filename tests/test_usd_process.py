@@ -302,3 +302,39 @@ def test_a_failed_write_in_the_child_is_the_commands_one_line_error(tmp_path):
     assert result["errors"] == [f"warpsim: error: USD file: USD could not write "
                                 f"'{tmp_path}/full.usdc': disk full"]
     assert "full.usdc" not in result["files"]
+
+
+def test_a_run_with_a_rerun_recording_forks_too(tmp_path):
+    pytest.importorskip("rerun", reason="the viewer extra (rerun-sdk) is not installed")
+    result = script(f"""
+        from warpsim.apps import cli
+        forks = spy_on_forks()
+        args = ["run", "room", "-n", "300", "--frames", "30", "--every", "3", "--no-progress",
+                "--rerun", "{tmp_path}/run.rrd"]
+        first = cli.main(args + ["-o", "{tmp_path}/a.usdc"])
+        pxr_after = "pxr" in sys.modules
+        usd_process.can_fork = lambda: False
+        second = cli.main(args + ["-o", "{tmp_path}/b.usdc"])
+        print(json.dumps({{"codes": [first, second], "forks": forks, "pxr": pxr_after,
+                          "rrd": os.path.getsize("{tmp_path}/run.rrd") > 0,
+                          "same": layer_text("{tmp_path}/a.usdc")
+                          == layer_text("{tmp_path}/b.usdc")}}))
+    """, tmp_path)
+    assert result == {"codes": [0, 0], "forks": [True, False], "pxr": False, "rrd": True,
+                      "same": True}
+
+
+def test_the_modules_the_command_checks_with_never_load_pxr(tmp_path):
+    result = script("""
+        import importlib
+        loaded = {}
+        for name in ("usd_size", "usd_layout", "usd_process", "rerun", "files"):
+            importlib.import_module(f"warpsim.export.{name}")
+            loaded[name] = "pxr" in sys.modules
+        scene = ws.Scene.load("room")
+        ws.export.estimate_usd_bytes(10, 3, ".usdc", boxes=scene)
+        loaded["estimate"] = "pxr" in sys.modules
+        print(json.dumps(loaded))
+    """, tmp_path)
+    assert result == dict.fromkeys(("usd_size", "usd_layout", "usd_process", "rerun", "files",
+                                    "estimate"), False)
