@@ -124,8 +124,8 @@ def main(argv=None) -> None:
     n = args.n or (20_000 if args.quick else 200_000)
     repeats = args.repeats or (1 if args.quick else 3)
     samples = {stage: [] for stage in STAGES}
-    whole = []
-    base = []
+    whole_runs = []  # (wall, printed simulation) [s] of each whole command, this checkout's
+    base_runs = []  # and REV's
     rev = None
     with tempfile.TemporaryDirectory() as tmp:
         usd = Path(tmp) / "room.usdc"
@@ -143,10 +143,10 @@ def main(argv=None) -> None:
                 samples[stage].append(seconds)
             sides = [None] if site is None else [None, site] if turn % 2 == 0 else [site, None]
             for side in sides:
-                (whole if side is None else base).append(command_time(n, usd, side))
-    own = statistics.median(wall / sim for wall, sim in whole)
-    own_base = statistics.median(wall / sim for wall, sim in base) if base else None
-    whole_runs, base_runs = whole, base
+                (whole_runs if side is None else base_runs).append(
+                    command_time(n, usd, side))
+    own = statistics.median(wall / sim for wall, sim in whole_runs)
+    own_base = statistics.median(wall / sim for wall, sim in base_runs) if base_runs else None
     whole = [wall for wall, _ in whole_runs]
     base = [wall for wall, _ in base_runs]
     median = {stage: statistics.median(values) for stage, values in samples.items()}

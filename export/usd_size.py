@@ -81,7 +81,7 @@ def estimate_usd_bytes(n_spheres: int, n_frames: int, fmt: str, *, boxes=None,
              + m["unborn"] * max(int(unborn), 0))
     boxes = getattr(boxes, "boxes", boxes)
     if boxes is not None and len(boxes):
-        shape_of, unique = shapes(boxes)
+        _, unique = shapes(boxes)
         rounded = int(np.count_nonzero(unique[:, 3] > 0.0))
         total += (m["per_box"] * len(boxes) + m["per_shape"] * len(unique)
                   + m["per_rounded_shape"] * rounded)

@@ -253,10 +253,13 @@ def _frame_range(args, scene_frames: int) -> tuple[int, int]:
 
 
 def check_memory(args, n: int, kept: int, records: int, every: int, frames: int,
-                 usd_bytes: float) -> None:
+                 usd_bytes: float) -> int:
     """Refuse, before anything is drawn, a run whose memory (:mod:`warpsim.footprint`: the
     swarm, the device state, the kept frames, the launch and event buffers, and the USD stage
-    being written) is above ``--max-memory``."""
+    being written) is above ``--max-memory``.
+
+    Returns:
+        The bytes of the frames the run keeps (``Simulator.run``'s recorded arrays)."""
     from .. import footprint
     from .. import validation as check
     from ..simulator import DEFAULT_EVENT_CAPACITY, LAUNCH_SPHERE_FRAMES
@@ -268,19 +271,20 @@ def check_memory(args, n: int, kept: int, records: int, every: int, frames: int,
                     else args.events_capacity)
         bounces = bounce_cap(8 if args.max_bounces is None else args.max_bounces)
         event_rows = 2 * min(capacity, n * frames * bounces)  # kept rows and a launch's
-    size = footprint.run_bytes(n, records, kept=kept,
-                               precision_bytes=4 if args.precision == "float32" else 8,
-                               velocities=bool(args.velocities),
-                               launch_sphere_frames=LAUNCH_SPHERE_FRAMES, every=every,
-                               event_rows=event_rows)
-    size = footprint.Footprint(swarm=size.swarm, device=size.device,
-                               trajectory=size.trajectory + int(usd_bytes), launch=size.launch,
-                               events=size.events, broad=size.broad)
+    run = footprint.run_bytes(n, records, kept=kept,
+                              precision_bytes=4 if args.precision == "float32" else 8,
+                              velocities=bool(args.velocities),
+                              launch_sphere_frames=LAUNCH_SPHERE_FRAMES, every=every,
+                              event_rows=event_rows)
+    size = footprint.Footprint(swarm=run.swarm, device=run.device,
+                               trajectory=run.trajectory + int(usd_bytes), launch=run.launch,
+                               events=run.events, broad=run.broad)
     limit = (footprint.default_limit() if args.max_memory is None
              else check.scalar("max_memory", args.max_memory, positive=True))
     footprint.check_fits(size, limit, "--max-memory",
                          "simulate fewer spheres (-n), keep fewer frames (--every, "
                          "--start/--end) or spheres (--spheres)")
+    return run.trajectory
 
 
 def _run_sharded(args, scene):
@@ -400,7 +404,7 @@ def _cmd_run(args) -> int:
         from ..export.rerun import check_recording_size
 
         check_recording_size(args, scene, n_written, n_records)
-    check_memory(args, n, n_written, n_records, every, end - start, estimate)
+    recorded_bytes = check_memory(args, n, n_written, n_records, every, end - start, estimate)
     check_device(args.device, args.debug_mode)
 
     def write_file(trajectory):
@@ -409,8 +413,6 @@ def _cmd_run(args) -> int:
     # the file's writer, forked now where it may be: it loads pxr while this process draws and
     # simulates, and reads the recorded frames from the memory they are recorded in
     # (export/usd_process.py); with --debug the file is written here, tracebacks whole
-    recorded_bytes = (n_records * n_written * (8 if args.precision == "float64" else 4)
-                      * (3 + 4 + (6 if args.velocities else 0)))  # Simulator.run's arrays
     with UsdWriter(write_file, fork=False if args.debug_mode else None,
                    share_bytes=recorded_bytes + 4 * SHARED_ALIGN) as usd_writer:
         # the block draw of a sharded run, so that the same command with --shards or --dask
