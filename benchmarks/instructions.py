@@ -73,6 +73,28 @@ MEMORY_EVENTS = {"Dr": "data_reads", "Dw": "data_writes", "D1mr": "l1_read_misse
                  "D1mw": "l1_write_misses", "DLmr": "ll_read_misses", "DLmw": "ll_write_misses",
                  "I1mr": "l1_instruction_misses", "ILmr": "ll_instruction_misses"}
 
+def valgrind_flags(cpuinfo: str | None = None) -> str:
+    """Compiler flags that keep the kernel within the instructions valgrind runs: Warp builds
+    CPU kernels with ``-march=native``, and valgrind (3.19 to 3.24) has no AVX-512, so on a
+    CPU with it (``avx512f`` among ``/proc/cpuinfo``'s flags) the kernel is built without it
+    (clang's front-end form of ``-mno-avx512f``, `` -target-feature -avx512f``, which also
+    turns off the extensions built on it): the code this CPU runs less its AVX-512
+    instructions, the same on both sides of ``--against``. Empty on a CPU without AVX-512
+    (the code is this CPU's).
+    ``cpuinfo`` is the text of ``/proc/cpuinfo`` (read when None)."""
+    if cpuinfo is None:
+        try:
+            cpuinfo = Path("/proc/cpuinfo").read_text(encoding="utf-8")
+        except OSError:
+            return ""
+    flags = next((line.split(":", 1)[1].split() for line in cpuinfo.splitlines()
+                  if line.startswith("flags")), [])
+    return " -target-feature -avx512f" if "avx512f" in flags else ""
+
+
+#: The flags every counted kernel is built with (:func:`valgrind_flags`).
+VALGRIND_FLAGS = valgrind_flags()
+
 #: The per-sphere-frame figures ``--memory`` adds to each row.
 MEMORY_FIGURES = ("data_reads", "data_writes", "l1_read_misses", "l1_write_misses",
                   "ll_read_misses", "ll_write_misses")
@@ -180,8 +202,8 @@ def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: s
     env = dict(os.environ)
     if site is not None:
         env["PYTHONPATH"] = str(site)
-    args = [sys.executable, "-c", CHILD, prec, motion, str(frames), broad_phase, data,
-            LINE_TABLES if where else ""]
+    flags = VALGRIND_FLAGS + (LINE_TABLES if where else "")
+    args = [sys.executable, "-c", CHILD, prec, motion, str(frames), broad_phase, data, flags]
     with tempfile.TemporaryDirectory() as tmp:
         native = native_build([*args, "", str(per_launch)], env, tmp)
         args += [native.get("isa", ""), str(per_launch)]
@@ -197,7 +219,11 @@ def count(site: Path | None, prec: str, motion: str, frames: int, broad_phase: s
             # counting on when it has built and taken its first frame, off after the frames
             ready = child.stdout.readline()
             if not ready.startswith("{"):
-                raise RuntimeError("the counted process did not start")
+                child.kill()
+                said = [line for line in child.communicate()[1].splitlines()
+                        if line and not line.startswith("==")]
+                raise RuntimeError("the counted process did not start: "
+                                   + (said[-1] if said else "it said nothing"))
             located = json.loads(ready)
             for expected, switch in (("", "on"), ("done", "off")):
                 if expected and child.stdout.readline().strip() != expected:

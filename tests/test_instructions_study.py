@@ -60,6 +60,20 @@ def test_the_summary_names_every_event_and_only_known_ones():
     assert study.summary("==1== no summary here\n") is None
 
 
+@pytest.mark.parametrize(("flags", "expected"), [
+    ("fpu sse2 avx avx2 fma bmi2", ""),  # AMD family 25: the code is the CPU's own
+    ("fpu avx avx2 avx512f avx512dq avx512vl avx_vnni", " -target-feature -avx512f"),
+    ("", ""),
+])
+def test_counted_kernels_leave_out_only_what_valgrind_cannot_run(flags, expected):
+    """On a CPU with AVX-512 (which valgrind does not run) the counted kernel is built
+    without it, in clang's front-end form; on others with no change; the first ``flags``
+    line of ``/proc/cpuinfo`` decides, and a text without one changes nothing."""
+    text = f"processor\t: 0\nflags\t\t: {flags}\nbugs\t\t: avx512f\n\nprocessor\t: 1\n"
+    assert study.valgrind_flags(text) == expected
+    assert study.valgrind_flags("processor\t: 0\n") == ""
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("valgrind") is None or shutil.which("callgrind_control") is None,
                     reason="valgrind is not installed (Debian's valgrind package)")
