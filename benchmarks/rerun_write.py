@@ -54,7 +54,8 @@ def measure(name: str, frames: int, folder: Path) -> dict:
     write_s = time.perf_counter() - start
     span = int(max(traj.frame[-1], events.frame.max(initial=0)) - traj.frame[0] + 1)
     estimate = estimate_rerun_bytes(len(swarm), len(traj), boxes=scene.boxes, scalars=True,
-                                    events=len(events), event_frames=span if len(events) else 0)
+                                    events=len(events), event_frames=span if len(events) else 0,
+                                    unborn=int(np.count_nonzero(~traj.alive())))
     size = path.stat().st_size
     return {"scene": name, "spheres": len(swarm), "frames": len(traj), "boxes": len(scene.boxes),
             "contacts": len(events), "bytes": size, "estimate": estimate,

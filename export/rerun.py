@@ -84,7 +84,8 @@ CONTACT_RADIUS_UI = -3.0  # contact points 3 UI points wide whatever the zoom (R
 _SIZE_MODEL = {"fixed": 50_000, "per_sphere": 17, "per_frame": 18, "per_sphere_frame": 12,
                "per_shape": 7_400, "per_rounded_shape": 4_500, "per_box": 25,
                "plots_fixed": 29_000, "per_plot_frame": 72,
-               "contacts_fixed": 6_000, "per_event": 40, "per_event_frame": 40}
+               "contacts_fixed": 6_000, "per_event": 40, "per_event_frame": 40,
+               "per_unborn_sphere_frame": 0.5}
 
 
 def _rerun():
@@ -130,10 +131,17 @@ def check_run_options(args) -> None:
     require_rerun()
 
 
-def check_recording_size(args, scene, n_spheres: int, n_frames: int) -> int:
+def check_recording_size(args, scene, n_spheres: int, n_frames: int, unborn: int = 0) -> int:
     """Refuse, before a run, a recording estimated above ``--max-bytes``
     (:func:`estimate_rerun_bytes` for the spheres and frames written, the scene's obstacles and
     the plots; contacts are not known before the run and not counted).
+
+    Args:
+        args: the command's options (``rerun``, ``rerun_sample``, ``max_bytes``).
+        scene: the scene run. n_spheres: spheres selected (before ``--rerun-sample``).
+        n_frames: recorded frames written.
+        unborn: sphere-frames of the written spheres (after ``--rerun-sample``, as
+            :func:`sampled_columns` picks them) recorded before their birth.
 
     Returns:
         The estimate [bytes].
@@ -142,7 +150,7 @@ def check_recording_size(args, scene, n_spheres: int, n_frames: int) -> int:
         ValueError: the estimate is above ``args.max_bytes``; the message says what to lower.
     """
     n = n_spheres if args.rerun_sample is None else min(n_spheres, args.rerun_sample)
-    estimate = estimate_rerun_bytes(n, n_frames, boxes=scene.boxes, scalars=True)
+    estimate = estimate_rerun_bytes(n, n_frames, boxes=scene.boxes, scalars=True, unborn=unborn)
     if estimate > args.max_bytes:
         raise ValueError(f"{str(args.rerun)!r} would be about {estimate / 1e6:,.0f} MB ({n} "
                          f"spheres x {n_frames} frames), above --max-bytes "
@@ -274,31 +282,40 @@ def run_with_scalars(sim, frames: int, every: int = 1, *, progress: bool = False
 
 
 def estimate_rerun_bytes(n_spheres: int, n_frames: int, *, boxes=None, scalars: bool = False,
-                         events: int = 0, event_frames: int = 0) -> int:
+                         events: int = 0, event_frames: int = 0, unborn: int = 0) -> int:
     """Estimated size of a file written by :func:`write_rerun` [bytes].
 
-    A linear model fitted on written files (``benchmarks/rerun_write.py``, within 10% of the
-    bundled scenes' recordings): 12 B per sphere and recorded frame (float32 positions, which
-    Rerun stores uncompressed), 17 B per sphere (radius, colour, label, id), 18 B per recorded
-    frame (its timelines), 7 kB per distinct obstacle shape (12 kB rounded) and 25 B per box,
-    72 B per recorded frame for the four plots, 40 B per contact and 40 B per frame the
-    contacts span, and about 50 kB of blueprint and description.
+    A linear model fitted on written files (``benchmarks/rerun_write.py``: from 4% below to
+    18% above the bundled scenes' recordings, the most above for a swarm that comes to rest,
+    galton's, whose chunks compress): 12 B per sphere and recorded
+    frame (float32 positions, which Rerun stores uncompressed), 0.5 B for one written before
+    its sphere's birth (NaN positions, which Rerun's chunk compression all but removes: 0.3 to
+    0.5 B measured on the nozzle's births), 17 B per sphere (radius, colour, label, id), 18 B
+    per recorded frame (its timelines), 7 kB per distinct obstacle shape (12 kB rounded) and
+    25 B per box, 72 B per recorded frame for the four plots, 40 B per contact and 40 B per
+    frame the contacts span, and about 50 kB of blueprint and description.
 
     Args:
         n_spheres: spheres written. n_frames: recorded frames written (after ``stride``).
         boxes: the obstacles (:class:`warpsim.RoundedBoxes` or a :class:`warpsim.Scene`), or None.
         scalars: whether the per-frame plots are written.
         events: contacts written. event_frames: frames the contacts' timeline spans.
+        unborn: of the ``n_spheres * n_frames`` sphere-frames written, those before their
+            sphere's birth (``~Trajectory.alive()`` of the rows and spheres written; 0 without
+            births).
 
     Raises:
-        ValueError: negative counts.
+        ValueError: negative counts, or ``unborn`` above ``n_spheres * n_frames``.
     """
-    n, f, e, ef = (int(v) for v in (n_spheres, n_frames, events, event_frames))
-    if min(n, f, e, ef) < 0:
+    n, f, e, ef, u = (int(v) for v in (n_spheres, n_frames, events, event_frames, unborn))
+    if min(n, f, e, ef, u) < 0:
         raise ValueError(f"counts must be >= 0, got n_spheres={n_spheres}, n_frames={n_frames}, "
-                         f"events={events}, event_frames={event_frames}")
+                         f"events={events}, event_frames={event_frames}, unborn={unborn}")
+    if u > n * f:
+        raise ValueError(f"unborn must be at most n_spheres * n_frames = {n * f}, got {unborn}")
     m = _SIZE_MODEL
-    total = m["fixed"] + n * m["per_sphere"] + f * (m["per_frame"] + n * m["per_sphere_frame"])
+    total = (m["fixed"] + n * m["per_sphere"] + f * (m["per_frame"] + n * m["per_sphere_frame"])
+             - u * (m["per_sphere_frame"] - m["per_unborn_sphere_frame"]))
     if scalars:
         total += m["plots_fixed"] + m["per_plot_frame"] * f
     if e:
@@ -478,12 +495,23 @@ def _sphere_rows(trajectory: Trajectory, stride: int, spheres, sample):
     """Validated (frame rows, columns of the trajectory) to write, as the USD writer selects
     them (the last row always kept), then ``sample`` of the columns evenly spread."""
     rows, columns = _selected(trajectory, stride, spheres)
-    if sample is not None:
-        sample = check.positive_int("sample", sample)
-        if sample < columns.size:  # first and last kept
-            columns = columns[np.unique(np.round(np.linspace(0, columns.size - 1, sample))
-                                        .astype(np.int64))]
-    return rows, columns
+    return rows, columns[sampled_columns(columns.size, sample)]
+
+
+def sampled_columns(count: int, sample: int | None) -> np.ndarray:
+    """Which of ``count`` selected spheres a recording of at most ``sample`` writes: their
+    positions in the selection, evenly spread, the first and the last kept; all of them when
+    ``sample`` is None or not below ``count``.
+
+    Raises:
+        ValueError: ``sample`` is not an integer >= 1.
+    """
+    if sample is None:
+        return np.arange(count, dtype=np.int64)
+    sample = check.positive_int("sample", sample)
+    if sample >= count:
+        return np.arange(count, dtype=np.int64)
+    return np.unique(np.round(np.linspace(0, count - 1, sample)).astype(np.int64))
 
 
 def write_rerun(path, scene, trajectory: Trajectory, *, stride: int = 1, spheres=None,
@@ -645,5 +673,5 @@ class _NamedBoxes:
 
 
 __all__ = ["FrameScalars", "check_recording_size", "check_rerun_path", "check_run_options",
-           "contact_frames", "estimate_rerun_bytes", "require_rerun",
-           "run_with_scalars", "sphere_colors", "triangulated", "usd_to_rerun", "write_rerun"]
+           "contact_frames", "estimate_rerun_bytes", "require_rerun", "run_with_scalars",
+           "sampled_columns", "sphere_colors", "triangulated", "usd_to_rerun", "write_rerun"]

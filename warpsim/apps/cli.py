@@ -204,7 +204,9 @@ def energy_line(sim, swarm, state) -> str:
 
 
 def _unborn_written(args, scene, n: int, subset, start: int, end: int, every: int) -> int:
-    """Sphere-frames a run writes before their sphere's birth (0 without births)."""
+    """Sphere-frames a run writes before their sphere's birth (0 without births): of the
+    spheres ``subset`` (swarm indices; None: all ``n``), at the records from ``start`` to
+    ``end`` every ``every`` frames (and ``end``)."""
     if not getattr(scene.emitter, "emits_over_time", False):
         return 0
     births = scene.emitter.birth_frames(scene.dt if args.dt is None else args.dt, n)
@@ -401,9 +403,12 @@ def _cmd_run(args) -> int:
                          f"{args.max_bytes:,.0f}: record fewer frames (--every, --start/--end) "
                          f"or spheres (--spheres), or raise --max-bytes")
     if args.rerun is not None:
-        from ..export.rerun import check_recording_size
+        from ..export.rerun import check_recording_size, sampled_columns
 
-        check_recording_size(args, scene, n_written, n_records)
+        recorded = np.arange(n) if subset is None else subset
+        recorded = recorded[sampled_columns(recorded.size, args.rerun_sample)]
+        check_recording_size(args, scene, n_written, n_records,
+                             unborn=_unborn_written(args, scene, n, recorded, start, end, every))
     recorded_bytes = check_memory(args, n, n_written, n_records, every, end - start, estimate)
     check_device(args.device, args.debug_mode)
 
