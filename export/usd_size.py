@@ -35,7 +35,9 @@ def estimate_usd_bytes(n_spheres: int, n_frames: int, fmt: str, *, boxes=None,
     """Estimated size of a file written by :func:`warpsim.export.write_usd` [bytes].
 
     A linear model fitted on written files (``benchmarks/usd_write.py``, within a few percent
-    of the bundled scenes' runs in ``.usdc``). The ``.usdc`` writer stores a time sample equal
+    of the bundled scenes' runs in ``.usdc`` whose spheres do not spin; above the others, by a
+    quarter for ``spin``, whose spheres start without spin and so store their first
+    orientations once). The ``.usdc`` writer stores a time sample equal
     to an earlier one only once, so what does not change costs nothing per frame: orientations
     of spheres that never spin (no friction, no initial spin) and zero angular velocities. Per
     sphere and frame, ``.usdc``: 12 B of position, 24 B of orientations (quatf + quath) when
