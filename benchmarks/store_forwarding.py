@@ -60,7 +60,11 @@ MOVE_BYTES = {"vmovss": 4, "movss": 4, "vmovd": 4, "movd": 4, "movl": 4, "vmovsd
 
 #: Moves of a whole register (16 bytes with ``xmm``, 32 with ``ymm``).
 VECTOR_MOVES = ("vmovups", "vmovaps", "vmovupd", "vmovapd", "vmovdqu", "vmovdqa", "vmovshdup",
-                "vmovsldup")
+                "vmovsldup", "vmovdqu32", "vmovdqu64", "vmovdqa32", "vmovdqa64")
+
+#: An AVX-512 memory operand broadcast from one element (``(%rsp){1to16}``): its element's
+#: bytes are read, not the register's.
+BROADCAST = re.compile(r"\{1to\d+\}")
 
 INSTRUCTION = re.compile(r"^\s*([0-9a-f]+):\s+(\S+)\s*(.*)$")
 STACK = re.compile(r"(?<![\w)])(-?0x[0-9a-f]+|-?\d+)?\((%rsp|%rbp)\)")
@@ -72,7 +76,10 @@ def access_bytes(mnemonic: str, operands: str) -> int | None:
     writes; None when not known."""
     if mnemonic in MOVE_BYTES:
         return MOVE_BYTES[mnemonic]
-    wide = 32 if "%ymm" in operands else 16
+    if BROADCAST.search(operands):
+        return 8 if mnemonic.endswith(("pd", "q")) else 4
+    # AVX-512 (a CPU with it, where Warp's -march=native uses it): 64-byte zmm registers
+    wide = 64 if "%zmm" in operands else 32 if "%ymm" in operands else 16
     if mnemonic in VECTOR_MOVES or mnemonic.endswith(("ps", "pd")):
         return wide
     if mnemonic.endswith("ss"):

@@ -40,6 +40,10 @@ def listed(*lines: str, window: int = sf.WINDOW) -> list[int]:
     ("vmovaps", "0x60(%rsp),%xmm1", 16), ("vmovupd", "0x248(%rsp),%xmm3", 16),
     ("vucomiss", "0x710(%rsp),%xmm0", 4), ("vsubps", "0x410(%rsp),%xmm1,%xmm1", 16),
     ("vaddsd", "0x8(%rsp),%xmm1,%xmm1", 8), ("cmp", "%eax,0x10(%rsp)", None),
+    # AVX-512, as Warp's -march=native emits it on a CPU with it
+    ("vmovups", "%zmm0,0x40(%rsp)", 64), ("vpermi2pd", "0x28(%rsp),%zmm2,%zmm0", 64),
+    ("vmovdqu64", "0x80(%rsp),%zmm3", 64), ("vmovdqa32", "%ymm1,0x20(%rsp)", 32),
+    ("vaddps", "0x10(%rsp){1to16},%zmm1,%zmm0", 4), ("vmulpd", "0x8(%rsp){1to8},%zmm1,%zmm0", 8),
 ])
 def test_access_sizes(mnemonic, operands, size):
     assert sf.access_bytes(mnemonic, operands) == size
