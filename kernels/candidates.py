@@ -424,8 +424,8 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
 
     @wp.func(inline=True)
     def nearest_bvh(q: Path, boxes: Boxes, broad: BroadPhase):
-        """The first contact over the boxes a query of the BVH returns (``broad.bvh = 0``, no
-        boxes: nothing is hit).
+        """The first contact over the boxes kept out of the BVH's tree (``broad.spanning_*``,
+        tried first) and those a query of the tree returns (``broad.bvh = 0``: no tree).
 
         With the BVH as the broad phase (``"bvh"``) in float32, the query's boxes are
         gathered first (up to ``BVH_BATCH``) and tried after the traversal, in the order it
@@ -438,29 +438,45 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
         best = int(-1)
         best_t = q.tau
         best_n = vec3(ZERO, ZERO, ZERO)
-        if broad.bvh != wp.uint64(0):
+        if broad.bvh != wp.uint64(0):  # a tree whenever there are boxes
             lower, upper = bvh_box(q)
             query = wp.bvh_query_aabb(broad.bvh, lower, upper)
+            j = broad.spanning_start  # the boxes kept out of the tree, first
+            end = broad.spanning_start + broad.spanning_count
             k = int(0)
             count = int(BVH_BATCH + 1)  # not gathered: each box tried as it comes
             if wp.static(batched):
                 found = BvhBatch()
                 count = int(0)
+                while j < end:
+                    if count < BVH_BATCH:
+                        found[count] = broad.cell_boxes[j]
+                    count += 1
+                    j += 1
                 while wp.bvh_query_next(query, k):
                     if count < BVH_BATCH:
                         found[count] = k
                     count += 1
                 if count <= BVH_BATCH:
-                    j = int(0)
-                    while j < count:
-                        best, best_t, best_n = candidate(q, boxes, found[j], best, best_t,
+                    i = int(0)
+                    while i < count:
+                        best, best_t, best_n = candidate(q, boxes, found[i], best, best_t,
                                                          best_n)
-                        j += 1
+                        i += 1
                 else:  # more than a batch: the same boxes in the same order, as they come
                     query = wp.bvh_query_aabb(broad.bvh, lower, upper)
+                    j = broad.spanning_start
             if count > BVH_BATCH:
-                while wp.bvh_query_next(query, k):
-                    best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
+                # one loop (one copy of the box's work): the kept-out boxes, then the query's
+                more = int(1)
+                while more == 1:
+                    if j < end:
+                        k = broad.cell_boxes[j]
+                        j += 1
+                    elif not wp.bvh_query_next(query, k):
+                        more = 0
+                    if more == 1:
+                        best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
         return best, best_t, best_n
 
     @wp.func(inline=True)

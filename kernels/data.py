@@ -160,7 +160,17 @@ def model_structs(p: Precision) -> ModelStructs:
         """
 
         bvh: wp.uint64
-        """Id of a ``warp.Bvh`` over the reject bounds (float32, rounded outward); 0: none."""
+        """Id of a ``warp.Bvh`` over the reject bounds (float32, rounded outward), item ``k``
+        box ``k``; the boxes in ``spanning`` hold empty bounds there (no query returns them);
+        0: none."""
+        spanning_start: int
+        """Where in ``cell_boxes`` the boxes kept out of the BVH's tree begin: those whose
+        bounds span most of the scene along two axes (``broad_phase.tree_split``), tried before
+        each of its queries. They share the grid's array, after its entries, so that this
+        struct, which the frame passes by value, grows by two integers only (an array more made
+        the float32 frame copy it with a loop: BENCHMARKS.md, "The BVH without the walls")."""
+        spanning_count: int
+        """How many boxes are kept out of the tree (0: none)."""
         lower: vec3
         """The grid's lowest corner [m]."""
         cell: vec3
@@ -177,7 +187,8 @@ def model_structs(p: Precision) -> ModelStructs:
         """Box indices of each cell, ascending within a cell. Walk: each entry is
         ``box << WALK_FLAG_BITS | flags``: bit ``i`` set when the cell is the first along axis
         ``i`` of the box's range of cells, bit ``3 + i`` when it is the last (``broad_phase.
-        WalkGrid.entries``)."""
+        WalkGrid.entries``). Then a placeholder entry, then, from ``spanning_start``, the
+        boxes kept out of the BVH's tree (plain box indices)."""
         reach: scalar
         """Walk: the largest growth per axis [m] (sphere radius plus the arc's sagitta) of a
         path the lists were made for (``broad_phase.WalkGrid.reach``)."""

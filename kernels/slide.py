@@ -305,19 +305,28 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
     def nearest_except(a: vec3, v: vec3, g: vec3, tau: scalar, r: scalar, boxes: Boxes,
                        broad: BroadPhase, skip: int):
         """First contact of the arc ``a + v s + 1/2 g s^2``, ``s`` in ``[0, tau]``, over every
-        box but ``skip`` (the support being left), world frame: the BVH query when the broad
-        phase has one, else every box; ``(box, s, normal)`` as ``nearest_hit_arc``."""
+        box but ``skip`` (the support being left), world frame: the boxes kept out of the BVH's
+        tree and its query when the broad phase has one, else every box; ``(box, s,
+        normal)`` as ``nearest_hit_arc``."""
         q = arc_path(a, v, g, tau, r)
         best = int(-1)
         best_s = tau
         best_n = vec3(ZERO, ZERO, ZERO)
         if wp.static(use_bvh):
-            if broad.bvh != wp.uint64(0):
+            if broad.bvh != wp.uint64(0):  # a tree whenever there are boxes
                 lower, upper = bvh_box(q)
                 query = wp.bvh_query_aabb(broad.bvh, lower, upper)
+                j = broad.spanning_start  # the boxes kept out of the tree, then the query's
+                end = broad.spanning_start + broad.spanning_count
                 k = int(0)
-                while wp.bvh_query_next(query, k):
-                    if k != skip:
+                more = int(1)
+                while more == 1:
+                    if j < end:
+                        k = broad.cell_boxes[j]
+                        j += 1
+                    elif not wp.bvh_query_next(query, k):
+                        more = 0
+                    if more == 1 and k != skip:
                         best, best_s, best_n = candidate(q, boxes, k, best, best_s, best_n)
         else:
             k = int(0)

@@ -120,6 +120,7 @@ def device_boxes(boxes: ws.RoundedBoxes, p, device="cpu"):
     out.extent = wp.array(extent, dtype=p.vec3, device=device)
     broad = structs.BroadPhase()
     broad.bvh = wp.uint64(bvh.id)
+    broad.spanning_start, broad.spanning_count = 1, 0  # every box in the tree
     broad.lower, broad.cell, broad.inv_cell = p.vec3(), p.vec3(1, 1, 1), p.vec3(1, 1, 1)
     broad.dims = wp.vec3i(0, 0, 0)
     broad.margin = p.scalar(0.0)

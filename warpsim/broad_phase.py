@@ -4,8 +4,9 @@ Four ways to find a sphere's candidate boxes, all bit-identical to trying every 
 the lower index, and each skips only boxes the path cannot hit before the first contact):
 
 - ``"brute"``: every box, in index order. Best for a handful of boxes.
-- ``"bvh"``: a query of a BVH over the boxes' reject bounds (Warp's ``wp.Bvh``). Best for many
-  boxes and fast spheres.
+- ``"bvh"``: a query of a BVH over the boxes' reject bounds (Warp's ``wp.Bvh``), the boxes
+  that span the scene (a room's walls) kept out of its tree and tried before each query
+  (:func:`tree_split`). Best for many boxes and fast spheres.
 - ``"grid"``: a uniform grid over the scene whose cells list the boxes within ``margin`` of the
   cell. A sphere whose path (grown by its radius) stays within the margin of the cell holding
   the path's midpoint reads that short list only (a path fits when half its extent plus the
@@ -50,6 +51,14 @@ REACH_QUANTILE = 0.95
 #: Margin over the measured reach: collisions turn speed between the axes and bounces turn it
 #: upward (a path's extent on one axis is at most its length, which the reach already bounds).
 REACH_FACTOR = 1.25
+
+#: A box whose reject bounds span more than this share of the scene's bounds along two axes
+#: (a room's floor, ceiling and walls) is kept out of the BVH's tree and tried before each
+#: query (:func:`tree_split`).
+SPANNING_SHARE = 0.5
+
+#: The most boxes kept out of the tree so (the widest first); the rest stay in it.
+SPANNING_MAX = 16
 
 #: Spheres (evenly spaced in the swarm) whose first frame the margin grid's cost is measured on.
 COST_SAMPLE = 4096
@@ -459,6 +468,46 @@ def build_walk_grid(boxes: RoundedBoxes, walk_reach: float, mean_path, dtype=np.
                     scale=scale, pad=pad, cell_start=start, cell_boxes=box_ids,
                     box_cell_lo=c_min.astype(np.int32), box_cell_hi=c_max.astype(np.int32),
                     cost=cost)
+
+
+def tree_split(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which boxes the BVH's tree holds, and which are tried before each of its queries.
+
+    A box whose bounds span more than ``SPANNING_SHARE`` of the scene's along two axes (a
+    room's floor, ceiling and walls) meets a large share of the queries wherever it sits in
+    the tree, and makes every node above it span the scene as well, so that a query visits
+    most of the tree: with the standard room's six walls in its tree the forced BVH took 56 ns a
+    sphere-frame at 5 m/s, the tree of its 16 plates alone 17 (BENCHMARKS.md, "The BVH
+    without the walls"). Those boxes (the ``SPANNING_MAX`` widest at most, by the product
+    of their two largest shares) are kept out and tried one by one, each through the same
+    reject; the candidates, and so the bits, are those of one tree over every box.
+
+    Args:
+        lower, upper: the boxes' BVH bounds [m] (:func:`warpsim.device.bvh_bounds`), (K, 3).
+
+    Returns:
+        ``(spanning, tree)``: int32 box indices, ascending: the boxes kept out, and the boxes
+        of the tree; the tree is never empty when there are boxes (where every box spans the
+        scene, none is kept out). An axis along which the scene has no extent counts as
+        spanned.
+    """
+    lower = np.asarray(lower, dtype=np.float64)
+    upper = np.asarray(upper, dtype=np.float64)
+    if len(lower) == 0:
+        return np.zeros(0, np.int32), np.zeros(0, np.int32)
+    span = upper.max(axis=0) - lower.min(axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(span > 0.0, (upper - lower) / np.where(span > 0.0, span, 1.0), 1.0)
+    two = np.sort(share, axis=1)[:, 1:]  # the two largest shares of each box
+    wide = np.flatnonzero(two[:, 0] > SPANNING_SHARE)
+    if wide.size > SPANNING_MAX:
+        order = np.argsort(-(two[wide, 0] * two[wide, 1]), kind="stable")
+        wide = np.sort(wide[order[:SPANNING_MAX]])
+    if wide.size == len(lower):  # every box spans the scene: one tree over them all
+        wide = wide[:0]
+    kept = np.ones(len(lower), dtype=bool)
+    kept[wide] = False
+    return wide.astype(np.int32), np.flatnonzero(kept).astype(np.int32)
 
 
 def exhaustive(box_count: int) -> tuple[str, float]:

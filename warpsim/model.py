@@ -26,7 +26,7 @@ import numpy as np
 import warp as wp
 
 from .blocks import copy_rows
-from .broad_phase import Grid, WalkGrid
+from .broad_phase import Grid, WalkGrid, tree_split
 from .device import bvh_bounds
 from .kernels.data import model_structs
 from .kernels.precision import Precision
@@ -157,11 +157,21 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
     # every box's reject bounds, padded and rounded outward to float32 (either precision holds
     # them): the BVH's leaves, and their union for the frame kernel's free-flight step
     lower, upper = bvh_bounds(center, extent) if len(boxes) else (None, None)
+    spanning = tree_boxes = np.zeros(0, np.int32)
     if broad_phase in ("bvh", "grid-bvh", "walk-bvh") and len(boxes):
-        # SAH on every device: the best trees for queries, and its builder caps the depth at
-        # the query stack's size (a static scene builds it once)
-        tree = wp.Bvh(wp.array(lower, dtype=wp.vec3f, device=device),
-                      wp.array(upper, dtype=wp.vec3f, device=device), constructor="sah")
+        # the boxes that span the scene (a room's walls) tried before each query, out of
+        # the tree (broad_phase.tree_split)
+        spanning, tree_boxes = tree_split(lower, upper)
+        if len(tree_boxes):
+            # SAH on every device: the best trees for queries, and its builder caps the depth
+            # at the query stack's size (a static scene builds it once); the boxes kept out
+            # hold empty bounds (lower above upper: no query meets them, no node grows)
+            tree_lower, tree_upper = lower.copy(), upper.copy()
+            tree_lower[spanning] = np.finfo(np.float32).max
+            tree_upper[spanning] = -np.finfo(np.float32).max
+            tree = wp.Bvh(wp.array(tree_lower, dtype=wp.vec3f, device=device),
+                          wp.array(tree_upper, dtype=wp.vec3f, device=device),
+                          constructor="sah")
     device_boxes = structs.Boxes()
     device_boxes.center = wp.array(center, dtype=p.vec3, device=device)
     device_boxes.rotation = wp.array(boxes.rotation_matrices().astype(dtype), dtype=p.mat33,
@@ -177,7 +187,8 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
     else:  # empty: every path lies beyond it
         device_boxes.lower = p.vec3(np.inf, np.inf, np.inf)
         device_boxes.upper = p.vec3(-np.inf, -np.inf, -np.inf)
-    broad = _broad_phase(structs.BroadPhase(), grid if kind is not None else None, p, device)
+    broad = _broad_phase(structs.BroadPhase(), grid if kind is not None else None, p, device,
+                         spanning)
     if isinstance(grid, WalkGrid) and len(grid.cell_boxes):
         bounds = np.stack([center[grid.cell_boxes], extent[grid.cell_boxes]], axis=1)
     else:
@@ -196,9 +207,11 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
                  bvh=tree)
 
 
-def _broad_phase(broad, grid: Grid | WalkGrid | None, p: Precision, device):
+def _broad_phase(broad, grid: Grid | WalkGrid | None, p: Precision, device,
+                 spanning: np.ndarray):
     """``broad`` (a ``BroadPhase``) with the grid's fields set (one empty cell without a grid;
-    the walk's fields empty without a walked grid)."""
+    the walk's fields empty without a walked grid) and the boxes kept out of the BVH's tree
+    (``spanning``, box indices) after the grid's entries and a placeholder."""
     walk = grid if isinstance(grid, WalkGrid) else None
     broad.reach = p.scalar(walk.reach if walk is not None else 0.0)
     broad.scale = p.scalar(walk.scale if walk is not None else 0.0)
@@ -209,17 +222,19 @@ def _broad_phase(broad, grid: Grid | WalkGrid | None, p: Precision, device):
         broad.dims = wp.vec3i(0, 0, 0)
         broad.margin = p.scalar(0.0)
         broad.cell_start = wp.zeros(2, dtype=wp.int32, device=device)
-        broad.cell_boxes = wp.zeros(1, dtype=wp.int32, device=device)
-        return broad
-    broad.lower = p.vec3(*grid.lower)
-    broad.cell = p.vec3(*grid.cell)
-    broad.inv_cell = p.vec3(*grid.inv_cell)
-    broad.dims = wp.vec3i(*(int(x) for x in grid.dims))
-    broad.margin = p.scalar(grid.kernel_margin if walk is None else 0.0)
-    broad.cell_start = wp.array(grid.cell_start, dtype=wp.int32, device=device)
-    entries = grid.entries() if walk is not None else grid.cell_boxes
-    broad.cell_boxes = wp.array(np.append(entries, np.int32(0)), dtype=wp.int32,
-                                device=device)
+        entries = np.zeros(0, np.int32)
+    else:
+        broad.lower = p.vec3(*grid.lower)
+        broad.cell = p.vec3(*grid.cell)
+        broad.inv_cell = p.vec3(*grid.inv_cell)
+        broad.dims = wp.vec3i(*(int(x) for x in grid.dims))
+        broad.margin = p.scalar(grid.kernel_margin if walk is None else 0.0)
+        broad.cell_start = wp.array(grid.cell_start, dtype=wp.int32, device=device)
+        entries = grid.entries() if walk is not None else grid.cell_boxes
+    broad.spanning_start = int(len(entries) + 1)
+    broad.spanning_count = int(len(spanning))
+    broad.cell_boxes = wp.array(np.concatenate([entries, [0], spanning]).astype(np.int32),
+                                dtype=wp.int32, device=device)
     return broad
 
 
