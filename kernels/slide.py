@@ -45,7 +45,7 @@ from types import SimpleNamespace
 import warp as wp
 
 from .arc import TOUCH_ULPS, arc_funcs
-from .candidates import bounds_funcs, candidate_funcs
+from .candidates import candidate_funcs
 from .data import model_structs
 from .nearest import nearest_funcs
 from .nearest_arc import nearest_arc_funcs
@@ -98,7 +98,9 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
     local_scale = arc.local_scale
     arc_path = nearest_arc_funcs(p).arc_path
     candidate = candidate_funcs(p, nearest_arc_funcs(p).sweep_arc, "brute").candidate
-    bvh_box = bounds_funcs(p).bvh_box
+    # the BVH's loop (its kept-out boxes, then the query's), never trying the path's ``left``
+    nearest_bvh = candidate_funcs(p, nearest_arc_funcs(p).sweep_arc, "bvh", leaves=True
+                                  ).nearest_bvh
     use_bvh = broad_phase in ("bvh", "grid-bvh")
     ZERO = scalar(0.0)
     HALF = scalar(0.5)
@@ -313,21 +315,8 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
         best_s = tau
         best_n = vec3(ZERO, ZERO, ZERO)
         if wp.static(use_bvh):
-            if broad.bvh != wp.uint64(0):  # a tree whenever there are boxes
-                lower, upper = bvh_box(q)
-                query = wp.bvh_query_aabb(broad.bvh, lower, upper)
-                j = broad.spanning_start  # the boxes kept out of the tree, then the query's
-                end = broad.spanning_start + broad.spanning_count
-                k = int(0)
-                more = int(1)
-                while more == 1:
-                    if j < end:
-                        k = broad.cell_boxes[j]
-                        j += 1
-                    elif not wp.bvh_query_next(query, k):
-                        more = 0
-                    if more == 1 and k != skip:
-                        best, best_s, best_n = candidate(q, boxes, k, best, best_s, best_n)
+            q.left = skip
+            best, best_s, best_n = nearest_bvh(q, boxes, broad)
         else:
             k = int(0)
             count = boxes.center.shape[0]
