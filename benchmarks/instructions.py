@@ -177,10 +177,17 @@ def need_valgrind() -> None:
 def save_case(scene_name: str, n: int, speed: float | None, folder: Path) -> str:
     """The scene's boxes, physics and swarm (its emitter's, the speed replaced by ``speed``
     [m/s] when given, seed 20240601), drawn by this checkout and saved as arrays, so every
-    side starts from the same spheres. Returns the file's path."""
+    side starts from the same spheres; ``grown-K`` is ``benchmarks.speed``'s grown room of
+    ``K`` boxes. Returns the file's path."""
     import warpsim as ws
 
-    scene = ws.Scene.load(scene_name)
+    if scene_name.startswith("grown-"):  # benchmarks.speed's grown room of K boxes
+        from .speed import SEED, grown_room
+
+        k = int(scene_name.removeprefix("grown-"))
+        scene = grown_room(k, n, np.random.default_rng([SEED, k]))
+    else:
+        scene = ws.Scene.load(scene_name)
     emitter = scene.emitter
     if speed is not None:
         emitter = dataclasses.replace(emitter, speed=float(speed))
@@ -329,7 +336,9 @@ def main(argv=None) -> None:
     p = parser("instructions", __doc__)
     p.add_argument("--against", default=None,
                    help="git revision to count side by side (default: this checkout only)")
-    p.add_argument("--scene", default="room", help="bundled scene (default room)")
+    p.add_argument("--scene", default="room",
+                   help="bundled scene (default room), or grown-K: benchmarks.speed's grown "
+                        "room of K boxes")
     p.add_argument("--cases", default=None,
                    help="comma-separated PRECISION/MOTION pairs (default: all four)")
     p.add_argument("--speeds", default="5,60",

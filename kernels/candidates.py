@@ -337,6 +337,11 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
     # nearest_bvh gathers a query's boxes first in float32 where the BVH is the method; as a
     # fallback (grid-bvh, walk-bvh) the gathering's code made the grid's frame 1.8x slower
     batched = p.name == "float32" and broad_phase == "bvh"
+    # the boxes that span the scene kept out of the tree where the BVH is the method; as the
+    # grids' fallback the tree holds every box (its loop then kept the frames' code as it was:
+    # the kept-out boxes' loop there made the float64 frames 1.04 to 2.6x slower, for paths
+    # the grid seldom gives the BVH; BENCHMARKS.md, "The BVH without the walls")
+    kept_out = broad_phase == "bvh"
 
     @wp.func(inline=True)
     def candidate(q: Path, boxes: Boxes, k: int, best: int, best_t: scalar, best_n: vec3):
@@ -441,10 +446,9 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
         if broad.bvh != wp.uint64(0):  # a tree whenever there are boxes
             lower, upper = bvh_box(q)
             query = wp.bvh_query_aabb(broad.bvh, lower, upper)
-            j = broad.spanning_start  # the boxes kept out of the tree, first
+            j = broad.spanning_start  # the boxes kept out of the tree, first ("bvh" only)
             end = broad.spanning_start + broad.spanning_count
             k = int(0)
-            count = int(BVH_BATCH + 1)  # not gathered: each box tried as it comes
             if wp.static(batched):
                 found = BvhBatch()
                 count = int(0)
@@ -463,11 +467,21 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
                         best, best_t, best_n = candidate(q, boxes, found[i], best, best_t,
                                                          best_n)
                         i += 1
-                else:  # more than a batch: the same boxes in the same order, as they come
+                else:  # more than a batch: the same boxes in the same order, as they come,
+                    # in one loop (the frame's code stays small enough to be inlined whole:
+                    # a third copy of the box's work made the float32 frame 1.14x slower)
                     query = wp.bvh_query_aabb(broad.bvh, lower, upper)
                     j = broad.spanning_start
-            if count > BVH_BATCH:
-                # one loop (one copy of the box's work): the kept-out boxes, then the query's
+                    more = int(1)
+                    while more == 1:
+                        if j < end:
+                            k = broad.cell_boxes[j]
+                            j += 1
+                        elif not wp.bvh_query_next(query, k):
+                            more = 0
+                        if more == 1:
+                            best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
+            elif wp.static(kept_out):  # each box tried as it comes, in one loop
                 more = int(1)
                 while more == 1:
                     if j < end:
@@ -477,6 +491,9 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
                         more = 0
                     if more == 1:
                         best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
+            else:  # the grid's fallback: a tree over every box, each tried as it comes
+                while wp.bvh_query_next(query, k):
+                    best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
         return best, best_t, best_n
 
     @wp.func(inline=True)

@@ -164,9 +164,10 @@ def model_structs(p: Precision) -> ModelStructs:
         box ``k``; the boxes in ``spanning`` hold empty bounds there (no query returns them);
         0: none."""
         spanning_start: int
-        """Where in ``cell_boxes`` the boxes kept out of the BVH's tree begin: those whose
-        bounds span most of the scene along two axes (``broad_phase.tree_split``), tried before
-        each of its queries. They share the grid's array, after its entries, so that this
+        """Where in ``cell_boxes`` the boxes kept out of the BVH's tree begin: with the BVH as
+        the broad phase (``"bvh"``), those whose bounds span most of the scene along two axes
+        (``broad_phase.tree_split``), tried before each of its queries; none as a grid's
+        fallback. They share the grid's array, after its entries, so that this
         struct, which the frame passes by value, grows by two integers only (an array more made
         the float32 frame copy it with a loop: BENCHMARKS.md, "The BVH without the walls")."""
         spanning_count: int

@@ -1,8 +1,9 @@
 """Boxes that span the scene (a room's walls) kept out of the BVH's tree and tried before each
-query (``broad_phase.tree_split``): which boxes are kept out, and the bits of every broad
-phase that queries the tree (``"bvh"``, ``"grid-bvh"``, ``"walk-bvh"``) against brute force,
-ties, batches beyond ``BVH_BATCH`` and the ballistic supports (the support left is a wall)
-included."""
+query where the BVH is the broad phase (``broad_phase.tree_split``): which boxes are kept
+out, and the bits of every broad phase that queries a tree (``"bvh"``, and ``"grid-bvh"`` and
+``"walk-bvh"``, whose tree holds every box, but whose supports leave through the same loop)
+against brute force, ties, batches beyond ``BVH_BATCH`` and the ballistic supports (the
+support left is a wall) included."""
 
 import numpy as np
 import pytest

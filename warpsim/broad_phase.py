@@ -471,7 +471,8 @@ def build_walk_grid(boxes: RoundedBoxes, walk_reach: float, mean_path, dtype=np.
 
 
 def tree_split(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Which boxes the BVH's tree holds, and which are tried before each of its queries.
+    """Which boxes the BVH's tree holds, and which are tried before each of its queries, where
+    the BVH is the broad phase (``"bvh"``; as a grid's fallback its tree holds every box).
 
     A box whose bounds span more than ``SPANNING_SHARE`` of the scene's along two axes (a
     room's floor, ceiling and walls) meets a large share of the queries wherever it sits in

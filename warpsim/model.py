@@ -159,9 +159,11 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
     lower, upper = bvh_bounds(center, extent) if len(boxes) else (None, None)
     spanning = tree_boxes = np.zeros(0, np.int32)
     if broad_phase in ("bvh", "grid-bvh", "walk-bvh") and len(boxes):
-        # the boxes that span the scene (a room's walls) tried before each query, out of
-        # the tree (broad_phase.tree_split)
-        spanning, tree_boxes = tree_split(lower, upper)
+        # with the BVH as the method, the boxes that span the scene (a room's walls) are tried
+        # before each query, out of the tree (broad_phase.tree_split); as a grid's fallback
+        # the tree holds every box (the kernels' fallback loop reads no kept-out boxes)
+        spanning, tree_boxes = (tree_split(lower, upper) if broad_phase == "bvh" else
+                                (spanning, np.arange(len(boxes), dtype=np.int32)))
         if len(tree_boxes):
             # SAH on every device: the best trees for queries, and its builder caps the depth
             # at the query stack's size (a static scene builds it once); the boxes kept out
