@@ -449,6 +449,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
             j = broad.spanning_start  # the boxes kept out of the tree, first ("bvh" only)
             end = broad.spanning_start + broad.spanning_count
             k = int(0)
+            more = int(0)  # 1: the kept-out boxes, then the query's, each tried as it comes
             if wp.static(batched):
                 found = BvhBatch()
                 count = int(0)
@@ -467,33 +468,26 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
                         best, best_t, best_n = candidate(q, boxes, found[i], best, best_t,
                                                          best_n)
                         i += 1
-                else:  # more than a batch: the same boxes in the same order, as they come,
-                    # in one loop (the frame's code stays small enough to be inlined whole:
-                    # a third copy of the box's work made the float32 frame 1.14x slower)
+                else:  # more than a batch: the same boxes in the same order, as they come
                     query = wp.bvh_query_aabb(broad.bvh, lower, upper)
                     j = broad.spanning_start
                     more = int(1)
-                    while more == 1:
-                        if j < end:
-                            k = broad.cell_boxes[j]
-                            j += 1
-                        elif not wp.bvh_query_next(query, k):
-                            more = 0
-                        if more == 1:
-                            best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
-            elif wp.static(kept_out):  # each box tried as it comes, in one loop
+            elif wp.static(kept_out):
                 more = int(1)
+            else:  # the grid's fallback: a tree over every box, each tried as it comes
+                while wp.bvh_query_next(query, k):
+                    best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
+            if wp.static(batched or kept_out):
+                # one loop for both (one copy of the box's work: a third copy made the
+                # float32 frame too large to inline whole, 1.14x slower)
                 while more == 1:
                     if j < end:
                         k = broad.cell_boxes[j]
                         j += 1
                     elif not wp.bvh_query_next(query, k):
-                        more = 0
+                        more = int(0)
                     if more == 1:
                         best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
-            else:  # the grid's fallback: a tree over every box, each tried as it comes
-                while wp.bvh_query_next(query, k):
-                    best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
         return best, best_t, best_n
 
     @wp.func(inline=True)
