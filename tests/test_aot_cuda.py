@@ -7,12 +7,13 @@ that would fail to build on a GPU fails here on the CPU-only machine first. Chec
 
 - in the suite (slow tier): a sample of 8 kernels, four for each architecture, one of each
   kind: the frame kernel with every optional feature on (the most code) with the
-  grid-then-BVH broad phase and with the walked grid (``walk-bvh``), and the collide and
-  bounce kernels with the grid-then-BVH broad phase and every feature on. Each architecture
-  gets every kind and every precision-motion pair once, and each kind gets both precisions
-  and both motions over the two (:func:`sample`). The PTX goes to Warp's kernel cache, keyed
-  by the module's content: a kernel already compiled for an architecture is not compiled
-  again;
+  grid-then-BVH broad phase and with the walked grid (``walk-bvh``), the collide kernel with
+  the BVH as its broad phase (its loop over the boxes kept out of the tree, gathered in
+  float32), and the bounce kernel with the grid-then-BVH broad phase and every feature on.
+  Each architecture gets every kind and every precision-motion pair once, and each kind
+  gets both precisions and both motions over the two (:func:`sample`). The PTX goes to
+  Warp's kernel cache, keyed by the module's content: a kernel already compiled for an
+  architecture is not compiled again;
 - ``WARPSIM_AOT=factories``: each factory over precision x motion x broad phase, with every
   feature on and, for the frame kernel, also with every one off;
 - ``WARPSIM_AOT=all``: the whole product of every flag of every factory (about 300 kernels).
@@ -48,7 +49,7 @@ def sample(arch: int):
         f = Features(precision=p, motion=m, broad_phase="grid-bvh")
         label, factory, features = (
             (f"frame/{p}/{m}/grid-bvh/all-on", frame_kernel, f.but(**ALL_ON)),
-            (f"collide/{p}/{m}/grid-bvh", collide_kernel, f),
+            (f"collide/{p}/{m}/bvh", collide_kernel, f.but(broad_phase="bvh")),
             (f"bounce/{p}/{m}/grid-bvh/all-on", bounce_kernel, f.but(spin=True, lossy=True)),
             (f"frame/{p}/{m}/walk-bvh/all-on", frame_kernel,
              f.but(broad_phase="walk-bvh", **ALL_ON)),
