@@ -432,6 +432,11 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
         """The first contact over the boxes kept out of the BVH's tree (``broad.spanning_*``,
         tried first) and those a query of the tree returns (``broad.bvh = 0``: no tree).
 
+        Boxes are kept out where the BVH is the broad phase (``"bvh"``): those that span the
+        scene, such as a room's walls (``broad_phase.tree_split``), which made a query visit
+        most of the tree (BENCHMARKS.md, "The BVH without the walls"); as a grid's fallback
+        the tree holds every box and its loop is the query's alone.
+
         With the BVH as the broad phase (``"bvh"``) in float32, the query's boxes are
         gathered first (up to ``BVH_BATCH``) and tried after the traversal, in the order it
         returned them; a query returning more is run a second time, each box tried as it
@@ -478,8 +483,8 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
                 while wp.bvh_query_next(query, k):
                     best, best_t, best_n = candidate(q, boxes, k, best, best_t, best_n)
             if wp.static(batched or kept_out):
-                # one loop for both (one copy of the box's work: a third copy made the
-                # float32 frame too large to inline whole, 1.14x slower)
+                # one loop for both (one copy of the box's work: a third copy left the
+                # float32 frame too large to inline whole, 1.027x its instructions)
                 while more == 1:
                     if j < end:
                         k = broad.cell_boxes[j]
