@@ -161,7 +161,8 @@ def model_structs(p: Precision) -> ModelStructs:
 
         bvh: wp.uint64
         """Id of a ``warp.Bvh`` over the reject bounds (float32, rounded outward), item ``k``
-        box ``k``; the boxes in ``spanning`` hold empty bounds there (no query returns them);
+        box ``k``; the boxes kept out of it (``spanning_start``, ``spanning_count``) hold empty
+        bounds there (no query returns them);
         0: none."""
         spanning_start: int
         """Where in ``cell_boxes`` the boxes kept out of the BVH's tree begin: with the BVH as

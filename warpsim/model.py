@@ -157,23 +157,22 @@ def put_model(boxes: RoundedBoxes, p: Precision, device, *, broad_phase: str, dt
     # every box's reject bounds, padded and rounded outward to float32 (either precision holds
     # them): the BVH's leaves, and their union for the frame kernel's free-flight step
     lower, upper = bvh_bounds(center, extent) if len(boxes) else (None, None)
-    spanning = tree_boxes = np.zeros(0, np.int32)
+    spanning = np.zeros(0, np.int32)
     if broad_phase in ("bvh", "grid-bvh", "walk-bvh") and len(boxes):
         # with the BVH as the method, the boxes that span the scene (a room's walls) are tried
-        # before each query, out of the tree (broad_phase.tree_split); as a grid's fallback
-        # the tree holds every box (the kernels' fallback loop reads no kept-out boxes)
-        spanning, tree_boxes = (tree_split(lower, upper) if broad_phase == "bvh" else
-                                (spanning, np.arange(len(boxes), dtype=np.int32)))
-        if len(tree_boxes):
-            # SAH on every device: the best trees for queries, and its builder caps the depth
-            # at the query stack's size (a static scene builds it once); the boxes kept out
-            # hold empty bounds (lower above upper: no query meets them, no node grows)
-            tree_lower, tree_upper = lower.copy(), upper.copy()
-            tree_lower[spanning] = np.finfo(np.float32).max
-            tree_upper[spanning] = -np.finfo(np.float32).max
-            tree = wp.Bvh(wp.array(tree_lower, dtype=wp.vec3f, device=device),
-                          wp.array(tree_upper, dtype=wp.vec3f, device=device),
-                          constructor="sah")
+        # before each query, out of the tree (broad_phase.tree_split, which never empties
+        # it); as a grid's fallback the tree holds every box (the kernels' fallback loop
+        # reads no kept-out boxes)
+        if broad_phase == "bvh":
+            spanning = tree_split(lower, upper)[0]
+        # SAH on every device: the best trees for queries, and its builder caps the depth at
+        # the query stack's size (a static scene builds it once); the boxes kept out hold
+        # empty bounds (lower above upper: no query meets them, no node grows)
+        tree_lower, tree_upper = lower.copy(), upper.copy()
+        tree_lower[spanning] = np.finfo(np.float32).max
+        tree_upper[spanning] = -np.finfo(np.float32).max
+        tree = wp.Bvh(wp.array(tree_lower, dtype=wp.vec3f, device=device),
+                      wp.array(tree_upper, dtype=wp.vec3f, device=device), constructor="sah")
     device_boxes = structs.Boxes()
     device_boxes.center = wp.array(center, dtype=p.vec3, device=device)
     device_boxes.rotation = wp.array(boxes.rotation_matrices().astype(dtype), dtype=p.mat33,
