@@ -179,7 +179,8 @@ def bounds_funcs(p: Precision) -> SimpleNamespace:
     # passes is a coin toss, and a branch per axis mispredicts: the branch-free form takes 0.78
     # to 0.89x the float32 frame at 60 m/s in the standard room; in float64 it measured no gain
     # at 60 m/s and 1.10x the frame at 5 m/s (BENCHMARKS.md, "Fast spheres: a reject without
-    # branches").
+    # branches"). Brute force, which rejects most of a scene's boxes every query, takes the
+    # branch-free form in float64 too (``candidate_funcs``).
     apart = apart_branch_free if p.name == "float32" else apart_per_axis
 
     @wp.func
@@ -323,6 +324,14 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
     Boxes, BroadPhase, _, _ = model_structs(p)
     bounds = bounds_funcs(p)
     apart, grid_fits, bvh_box = bounds.apart, bounds.grid_fits, bounds.bvh_box
+    # brute force's reject: branch-free in both precisions where it is the method, over a
+    # scene's every box (the float64 frame 0.74 to 0.91x with it); as a grid's fallback it
+    # keeps ``apart``, so the grid's frames keep their code (with it there the float64
+    # ballistic frame took 1.01x the instructions), and the BVH's loop keeps it too (1.02 to
+    # 1.04x the float64 frame with it; BENCHMARKS.md, "float64: brute force's loop in
+    # registers")
+    apart_every = bounds.apart_branch_free if broad_phase == "brute" else apart
+    normal_scalars = p.name == "float64"  # brute force's loop (see ``nearest_brute``)
     use_grid = broad_phase in ("grid", "grid-bvh")
     use_walk = broad_phase in ("walk", "walk-bvh")
     fallback_bvh = broad_phase in ("bvh", "grid-bvh", "walk-bvh")
@@ -368,7 +377,7 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
         """1 when box ``k`` (centre ``center`` [m], world half-extent ``extent`` [m]) passes
         the reject and, with ``leaves``, is not the box the path has left."""
         out = int(0)
-        if apart(q, center, extent) == 0:
+        if apart_every(q, center, extent) == 0:
             out = 1
             if wp.static(leaves):
                 if k == q.left:
@@ -400,12 +409,33 @@ def candidate_funcs(p: Precision, exact, broad_phase: str, leaves: bool = False,
         # so measured no gain, and keep it
         k = int(0)
         count = boxes.center.shape[0]
-        while k < count:
-            center = boxes.center[k]
-            if considered(q, center, boxes.extent[k], k) == 1:
-                best, best_t, best_n = closer(q, center, boxes.rotation[k], boxes.half_extents[k],
-                                              boxes.radius[k], k, best, best_t, best_n)
-            k += 1
+        if wp.static(normal_scalars):
+            # the normal carried as three scalars in float64: carried as a ``vec3``, clang
+            # kept it in memory and copied it onto itself every turn, a chain through memory
+            # that made the float64 frame 1.5 to 1.8x slower (BENCHMARKS.md, "float64: brute
+            # force's loop in registers"); in float32 it measured no gain, and carried so
+            # through :func:`candidate` (the grid's, the walk's and the BVH's step) it took
+            # 1.02 to 1.06x the float32 grid frame's instructions, so they keep the ``vec3``
+            n0, n1, n2 = scalar(0.0), scalar(0.0), scalar(0.0)
+            while k < count:
+                center = boxes.center[k]
+                if considered(q, center, boxes.extent[k], k) == 1:
+                    hit, t, normal = exact(q, center, boxes.rotation[k],
+                                           boxes.half_extents[k], boxes.radius[k])
+                    if hit == 1 and (best < 0 or t < best_t or (t == best_t and k < best)):
+                        best = k
+                        best_t = t
+                        n0, n1, n2 = normal[0], normal[1], normal[2]
+                k += 1
+            best_n = vec3(n0, n1, n2)
+        else:
+            while k < count:
+                center = boxes.center[k]
+                if considered(q, center, boxes.extent[k], k) == 1:
+                    best, best_t, best_n = closer(q, center, boxes.rotation[k],
+                                                  boxes.half_extents[k], boxes.radius[k], k,
+                                                  best, best_t, best_n)
+                k += 1
         return best, best_t, best_n
 
     @wp.func(inline=True)

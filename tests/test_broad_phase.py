@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import warpsim as ws
-from warpsim.device import BVH_MIN_BOXES, bvh_bounds
+from warpsim.device import BVH_MIN_BOXES, BVH_MIN_BOXES_FLOAT64, bvh_bounds, bvh_min_boxes
 from warpsim.kernels.nearest import REJECT_SLACK
 
 DT = 1.0 / 60.0
@@ -138,6 +138,88 @@ def test_auto_keeps_brute_force_for_few_boxes(device):
     boxes = ws.RoundedBoxes(np.zeros((3, 3)), np.full((3, 3), 0.1))
     swarm = ws.Swarm([[0.0, 1.0, 0.0]], [[0.0, 0.0, 0.0]], 0.05)
     assert ws.Simulator(ws.Scene(boxes), swarm, device=device).broad_phase == "brute"
+
+
+def test_exhaustive_takes_the_bvh_from_each_precisions_measured_count():
+    """Without a grid the BVH replaces brute force from 32 boxes in float32 and from 20 in
+    float64 (where a box's reject costs more against the BVH's traversal), for every box
+    count; in float64 the model's BVH costs no more than brute force exactly from 20 boxes
+    on (its fixed cost is set so), so the model and the switch agree there, and each
+    method's cost grows with the boxes."""
+    from warpsim import broad_phase as broad
+
+    assert (BVH_MIN_BOXES, BVH_MIN_BOXES_FLOAT64) == (32, 20)
+    assert bvh_min_boxes(np.float32) == bvh_min_boxes("float32") == BVH_MIN_BOXES
+    assert bvh_min_boxes(np.float64) == bvh_min_boxes("float64") == BVH_MIN_BOXES_FLOAT64
+    for dtype, edge in ((np.float32, 32), (np.float64, 20)):
+        costs = []
+        for k in range(0, 200):
+            method, cost = broad.exhaustive(k, dtype)
+            assert method == ("bvh" if k >= edge else "brute"), (dtype, k)
+            assert cost > 0.0
+            costs.append((method, cost))
+        for (m0, c0), (m1, c1) in zip(costs[:-1], costs[1:], strict=True):
+            if m0 == m1:
+                assert c1 > c0
+    assert broad.exhaustive(40) == broad.exhaustive(40, np.float32)
+    brute = [broad.BRUTE_FIXED + k for k in range(1, 200)]
+    tree = [broad.BVH_FIXED_FLOAT64 + broad.BVH_PER_LEVEL * np.log2(k) for k in range(1, 200)]
+    cheaper = [k for k, (b, t) in enumerate(zip(brute, tree, strict=True), start=1)
+               if t <= b + 1e-12]
+    assert cheaper == list(range(BVH_MIN_BOXES_FLOAT64, 200))
+
+
+@pytest.mark.parametrize("k", [19, 20, 31, 32])
+def test_the_grids_fallback_follows_the_precision(k):
+    """``"grid"`` falls back to the exhaustive method of the kernels' precision: the BVH
+    (``grid-bvh``) from 20 boxes in float64 and from 32 in float32."""
+    from warpsim import broad_phase as broad
+
+    rng = np.random.default_rng(k)
+    boxes = ws.RoundedBoxes(rng.uniform(-30.0, 30.0, (k, 3)), rng.uniform(0.1, 1.0, (k, 3)),
+                            rotation=random_rotations(rng, k))
+    position = rng.uniform(-30.0, 30.0, (200, 3))
+    frame = broad.paths(position, rng.normal(size=(200, 3)), np.full(200, 0.05),
+                        (0.0, -9.81, 0.0), DT, boxes)
+    for dtype in (np.float32, np.float64):
+        name, grid = broad.choose("grid", boxes, frame, dtype)
+        assert grid is not None
+        assert name == ("grid-bvh" if k >= bvh_min_boxes(dtype) else "grid"), (k, dtype)
+        assert broad.choose("auto", boxes, frame, dtype, queries=1) == (
+            broad.exhaustive(k, dtype)[0], None)
+
+
+def test_the_bundled_scenes_take_the_measured_method_per_precision():
+    """``auto``'s choices where the precision changes them: the standard room (22 boxes)
+    takes the grid with brute force as its fallback in float32 and with the BVH in float64;
+    ``thin-walls`` (16 boxes, 200 to 400 m/s) keeps brute force in both (BENCHMARKS.md,
+    "float64: brute force's loop in registers")."""
+    for name, want in (("room", {"float32": "grid", "float64": "grid-bvh"}),
+                       ("thin-walls", {"float32": "brute", "float64": "brute"})):
+        scene = ws.Scene.load(name)
+        swarm = scene.spawn(n=500, seed=4)
+        got = {precision: ws.Simulator(scene, swarm, precision=precision,
+                                       device="cpu").broad_phase
+               for precision in ("float32", "float64")}
+        assert got == want, name
+
+
+@pytest.mark.parametrize("motion", ["linear", "ballistic"])
+def test_float64_brute_force_keeps_the_bvhs_bits_among_thin_walls(device, motion):
+    """Brute force's float64 loop (the branch-free reject, the normal in registers) against
+    the BVH among ``thin-walls``' zero-thickness plates at 200 to 400 m/s: the same bits and
+    bounce counts, and no sphere leaves its cell."""
+    scene = ws.Scene.load("thin-walls")
+    swarm = scene.spawn(n=300, seed=4)
+    sims = {bp: ws.Simulator(scene, swarm, precision="float64", motion=motion, device=device,
+                             broad_phase=bp) for bp in ("brute", "bvh")}
+    for sim in sims.values():
+        sim.step(20)
+    brute, bvh = sims["brute"], sims["bvh"]
+    assert_same(brute.state(), bvh.state(), STATE_FIELDS)
+    assert brute.stats.bounces == bvh.stats.bounces > 1000
+    start, end = np.sign(swarm.position[:, :2]), np.sign(brute.state().position[:, :2])
+    assert np.array_equal(start, end)
 
 
 @pytest.mark.parametrize("k", [0, 1, 2, 3])

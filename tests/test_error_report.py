@@ -152,3 +152,19 @@ def test_ballistic_run_agrees_with_the_reference_at_every_step_size(device):
         assert rep.position_error["0.5 s"]["max_m"] < 1e-7
         if rep.contacts["compared"]:
             assert rep.contacts["time_error_max_s"] < 1e-7
+
+
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_the_report_compares_a_run_whose_grid_falls_back_to_the_bvh(device, precision):
+    """A run whose grid falls back to the BVH (``grid-bvh``: galton's 162 boxes in either
+    precision) is compared like any other: the report's own run of its sample asks for the
+    grid by name and compiles the same method."""
+    scene = ws.Scene.load("galton")
+    swarm = scene.spawn(n=64, seed=1)
+    sim = ws.Simulator(scene, swarm, precision=precision, device=device)
+    assert sim.broad_phase == "grid-bvh"
+    sim.run(12)
+    assert error_report._like(sim, scene, swarm).broad_phase == "grid-bvh"
+    rep = error_report.compare(sim, scene, swarm, sample=2)
+    assert rep.horizon == pytest.approx(12 * sim.dt)
+    assert rep.position_error["0.1 s"]["max_m"] < 1e-3

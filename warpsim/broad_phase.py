@@ -37,7 +37,7 @@ import numpy as np
 
 from . import validation as check
 from .blocks import for_row_blocks
-from .device import BVH_MIN_BOXES, bvh_bounds
+from .device import BVH_MIN_BOXES_FLOAT64, bvh_bounds, bvh_min_boxes
 from .energy import lowest_potential
 from .kernels.candidates import BOUNDS_PAD_ABS, BOUNDS_PAD_REL, REJECT_SLACK, WALK_PAD_ULPS
 from .kernels.data import WALK_FLAG_BITS
@@ -97,6 +97,13 @@ BRUTE_FIXED = 2.0
 GRID_FIXED = 4.0
 BVH_FIXED = 12.0
 BVH_PER_LEVEL = 3.0
+
+#: The BVH's fixed cost in float64, where a box's reject costs more against the BVH's
+#: traversal than in float32: set so that the model's BVH ties brute force at
+#: ``BVH_MIN_BOXES_FLOAT64`` boxes, where they were measured to tie (BENCHMARKS.md, "float64:
+#: brute force's loop in registers").
+BVH_FIXED_FLOAT64 = (BRUTE_FIXED + BVH_MIN_BOXES_FLOAT64
+                     - BVH_PER_LEVEL * math.log2(BVH_MIN_BOXES_FLOAT64))
 
 #: What building the grids ``auto`` compares costs on the host, in the cost model's unit: a
 #: launch of fewer queries than this over the exhaustive method's cost per query takes that
@@ -511,11 +518,14 @@ def tree_split(lower: np.ndarray, upper: np.ndarray) -> tuple[np.ndarray, np.nda
     return wide.astype(np.int32), np.flatnonzero(kept).astype(np.int32)
 
 
-def exhaustive(box_count: int) -> tuple[str, float]:
-    """The method that tries every candidate without a grid, and its cost by the model: the BVH
-    from ``BVH_MIN_BOXES`` boxes on (where it was measured to win), every box below."""
-    if box_count >= BVH_MIN_BOXES:
-        return "bvh", BVH_FIXED + BVH_PER_LEVEL * math.log2(box_count)
+def exhaustive(box_count: int, dtype=np.float32) -> tuple[str, float]:
+    """The method that tries every candidate without a grid, and its cost by the model, for
+    kernels of float type ``dtype``: the BVH from ``device.bvh_min_boxes(dtype)`` boxes on
+    (where it was measured to win: 32 in float32, 20 in float64), every box below; the
+    BVH's fixed cost is ``BVH_FIXED_FLOAT64`` in float64."""
+    if box_count >= bvh_min_boxes(dtype):
+        fixed = BVH_FIXED_FLOAT64 if np.dtype(dtype) == np.float64 else BVH_FIXED
+        return "bvh", fixed + BVH_PER_LEVEL * math.log2(box_count)
     return "brute", BRUTE_FIXED + box_count
 
 
@@ -538,7 +548,7 @@ def margin_grid(boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
     ``TABLE_PENALTY`` per doubling of a table beyond ``CACHE_CELLS``): the finest grid the
     margin allows, or the one of ``CACHE_CELLS`` cells at most when that costs less; None when
     none can be built."""
-    fallback_cost = exhaustive(len(boxes))[1]
+    fallback_cost = exhaustive(len(boxes), dtype)[1]
     best = None
     for max_cells in (MAX_CELLS, CACHE_CELLS):
         grid = build_grid(boxes, frame.margin, dtype, max_cells)
@@ -562,7 +572,7 @@ def estimates(boxes: RoundedBoxes, frame: Paths, dtype=np.float32) -> dict:
         (a grid falls back to the exhaustive method).
     """
     k = len(boxes)
-    fallback, fallback_cost = exhaustive(k)
+    fallback, fallback_cost = exhaustive(k, dtype)
     out = {fallback: (fallback_cost, None)}
     if not k:
         return out
@@ -624,15 +634,15 @@ def choose(requested: str, boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
             else:
                 grid = build_walk_grid(boxes, frame.reach, frame.mean_path, dtype)
         if grid is None:
-            return exhaustive(k)[0], None
-        name = choice + ("-bvh" if exhaustive(k)[0] == "bvh" else "")
-    elif (exhaustive(k)[1] <= GRID_FIXED
-          or queries is not None and queries * exhaustive(k)[1] <= GRID_BUILD):
+            return exhaustive(k, dtype)[0], None
+        name = choice + ("-bvh" if exhaustive(k, dtype)[0] == "bvh" else "")
+    elif (exhaustive(k, dtype)[1] <= GRID_FIXED
+          or queries is not None and queries * exhaustive(k, dtype)[1] <= GRID_BUILD):
         # no grid can win: by the model a margin grid costs at least GRID_FIXED and a walked
         # one at least WALK_FIXED + WALK_PER_CELL, so a scene of a box or two takes its
         # exhaustive method without building the grids (milliseconds a call for a few
         # spheres); nor where the launch's every query costs less than building them
-        name, grid = exhaustive(k)[0], None
+        name, grid = exhaustive(k, dtype)[0], None
     else:
         options = estimates(boxes, frame, dtype)
         name = preferred(options)

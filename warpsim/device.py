@@ -7,13 +7,28 @@ import warp as wp
 
 from .kernels.candidates import BOUNDS_PAD_REL, REJECT_SLACK
 
-#: Without a grid, the BVH is used from this many boxes on, every box below
+#: Without a grid, the BVH is used from this many boxes on in float32, every box below
 #: (``warpsim.broad_phase.exhaustive``: the fallback of the grid, and ``"auto"``'s choice when
 #: the grid does not pay).
 #: Measured on the CPU (float32, 1e4 spheres at 5 and 60 m/s): in the standard room with its
 #: plates made more numerous, the two tie at K = 28 and the BVH wins from K = 32 (1.1-1.2x,
-#: 1.6-1.8x at K = 64); in the random-box sweep scene it wins from K = 12 already.
+#: 1.6-1.8x at K = 64); in the random-box sweep scene it wins from K = 12 already. Measured
+#: again since the BVH keeps a room's walls out of its tree (2e4 spheres, 240 frames, family
+#: 26 CPU; ``benchmarks.bvh_crossover``): at K = 32 the BVH takes 0.73 to 0.76x brute force's
+#: time at 5 m/s and 0.97 to 1.02x at 60 m/s, at K = 28 0.76 to 1.06x.
 BVH_MIN_BOXES = 32
+
+#: The same in float64 (BENCHMARKS.md, "float64: brute force's loop in registers"): in the
+#: same grown rooms, both motions at 5 and 60 m/s, the BVH takes 0.83 to 1.20x brute force's
+#: time at K = 16 (1.05x on average over the four cases) and 0.66 to 1.02x at K = 22 (0.87x):
+#: they tie near 20 boxes, where float32's tie near 28.
+BVH_MIN_BOXES_FLOAT64 = 20
+
+
+def bvh_min_boxes(dtype=np.float32) -> int:
+    """Boxes from which the BVH replaces brute force for kernels of float type ``dtype``
+    (``BVH_MIN_BOXES``, ``BVH_MIN_BOXES_FLOAT64``)."""
+    return BVH_MIN_BOXES_FLOAT64 if np.dtype(dtype) == np.float64 else BVH_MIN_BOXES
 
 
 def resolve_device(device=None) -> wp.context.Device:
@@ -47,4 +62,5 @@ def bvh_bounds(center: np.ndarray, extent: np.ndarray) -> tuple[np.ndarray, np.n
     return lower32, upper32
 
 
-__all__ = ["BVH_MIN_BOXES", "bvh_bounds", "resolve_device"]
+__all__ = ["BVH_MIN_BOXES", "BVH_MIN_BOXES_FLOAT64", "bvh_bounds", "bvh_min_boxes",
+           "resolve_device"]

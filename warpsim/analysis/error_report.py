@@ -499,11 +499,14 @@ def reference_figures(ref: ReferenceRun) -> dict:
 
 
 def _like(sim, scene: Scene, sub: Swarm):
-    """A simulator for ``sub`` with ``sim``'s settings."""
+    """A simulator for ``sub`` with ``sim``'s settings: its broad phase asked for by name (a
+    grid's fallback, ``grid-bvh`` or ``walk-bvh``, is the grid's, ``grid`` or ``walk``: the
+    choice a simulator makes for the same scene and precision)."""
     from ..simulator import Simulator
 
     kwargs = dict(dt=sim.dt, max_bounces=sim.max_bounces, device=sim.device,
-                  precision=sim.precision, broad_phase=sim.broad_phase)
+                  precision=sim.precision,
+                  broad_phase=str(sim.broad_phase).removesuffix("-bvh"))
     motion = getattr(sim, "motion", None)
     if motion is not None and motion != "linear":
         kwargs["motion"] = motion
