@@ -97,8 +97,10 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
     quadratic_roots = arc.quadratic_roots
     local_scale = arc.local_scale
     arc_path = nearest_arc_funcs(p).arc_path
-    candidate = candidate_funcs(p, nearest_arc_funcs(p).sweep_arc, "brute").candidate
-    # the BVH's loop (its kept-out boxes, then the query's), never trying the path's ``left``
+    # every box's loop, or the BVH's (its kept-out boxes, then the query's), never trying
+    # the path's ``left``
+    nearest_brute = candidate_funcs(p, nearest_arc_funcs(p).sweep_arc, "brute", leaves=True
+                                    ).nearest_brute
     nearest_bvh = candidate_funcs(p, nearest_arc_funcs(p).sweep_arc, "bvh", leaves=True
                                   ).nearest_bvh
     use_bvh = broad_phase in ("bvh", "grid-bvh")
@@ -311,19 +313,14 @@ def slide_funcs(p: Precision, broad_phase: str) -> SimpleNamespace:
         tree and its query when the broad phase has one, else every box; ``(box, s,
         normal)`` as ``nearest_hit_arc``."""
         q = arc_path(a, v, g, tau, r)
+        q.left = skip
         best = int(-1)
         best_s = tau
         best_n = vec3(ZERO, ZERO, ZERO)
         if wp.static(use_bvh):
-            q.left = skip
             best, best_s, best_n = nearest_bvh(q, boxes, broad)
         else:
-            k = int(0)
-            count = boxes.center.shape[0]
-            while k < count:
-                if k != skip:
-                    best, best_s, best_n = candidate(q, boxes, k, best, best_s, best_n)
-                k += 1
+            best, best_s, best_n = nearest_brute(q, boxes)
         return best, best_s, best_n
 
     @wp.func
