@@ -625,6 +625,7 @@ def choose(requested: str, boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
     if choice in ("brute", "bvh"):
         return choice, None
     k = len(boxes)
+    method, cost = exhaustive(k, dtype)
     if choice in ("grid", "walk"):
         grid = None
         if k:
@@ -634,15 +635,14 @@ def choose(requested: str, boxes: RoundedBoxes, frame: Paths, dtype=np.float32,
             else:
                 grid = build_walk_grid(boxes, frame.reach, frame.mean_path, dtype)
         if grid is None:
-            return exhaustive(k, dtype)[0], None
-        name = choice + ("-bvh" if exhaustive(k, dtype)[0] == "bvh" else "")
-    elif (exhaustive(k, dtype)[1] <= GRID_FIXED
-          or queries is not None and queries * exhaustive(k, dtype)[1] <= GRID_BUILD):
+            return method, None
+        name = choice + ("-bvh" if method == "bvh" else "")
+    elif cost <= GRID_FIXED or queries is not None and queries * cost <= GRID_BUILD:
         # no grid can win: by the model a margin grid costs at least GRID_FIXED and a walked
         # one at least WALK_FIXED + WALK_PER_CELL, so a scene of a box or two takes its
         # exhaustive method without building the grids (milliseconds a call for a few
         # spheres); nor where the launch's every query costs less than building them
-        name, grid = exhaustive(k, dtype)[0], None
+        name, grid = method, None
     else:
         options = estimates(boxes, frame, dtype)
         name = preferred(options)
